@@ -1,0 +1,161 @@
+"""Configuration dataclasses shared by the cores, the nodes and the offline tools (no ROS here).
+
+Every algorithm core describes its constants as a dataclass whose fields are made with
+:func:`param`: the default (the paper's value where the paper gives one), a one-line description,
+and a valid range or set of choices. The nodes turn these fields into ROS 2 parameters with
+descriptors and ranges (``node_base.PerceptionNode.declare_config``); the offline tools turn them
+into command-line options and read the same ``config/*.yaml`` files; so there is one list of
+constants, one set of defaults, and one validation.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence, TypeVar
+
+import yaml
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A configuration value outside its declared range or choices."""
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """What a configuration field promises: description, range or choices."""
+
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple | None = None
+    read_only: bool = False
+
+    def check(self, name: str, value: Any) -> None:
+        """Raise ConfigError with a reason when ``value`` breaks the spec."""
+        if self.choices is not None and value not in self.choices:
+            raise ConfigError(f"{name}={value!r} is not one of {list(self.choices)}")
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if value != value:  # NaN
+                raise ConfigError(f"{name} is NaN")
+            if self.low is not None and value < self.low:
+                raise ConfigError(f"{name}={value} is below its minimum {self.low}")
+            if self.high is not None and value > self.high:
+                raise ConfigError(f"{name}={value} is above its maximum {self.high}")
+
+
+def param(default: Any, description: str, *, low: float | None = None, high: float | None = None,
+          choices: Sequence | None = None, read_only: bool = False) -> Any:
+    """A dataclass field carrying a ParamSpec (use for every tunable constant of a core)."""
+    spec = ParamSpec(description, low, high, tuple(choices) if choices is not None else None, read_only)
+    if isinstance(default, (list, dict)):
+        return field(default_factory=lambda: type(default)(default), metadata={"spec": spec})
+    return field(default=default, metadata={"spec": spec})
+
+
+def spec_of(f: dataclasses.Field) -> ParamSpec:
+    return f.metadata.get("spec") or ParamSpec(description=f.name)
+
+
+def validate(config: Any) -> Any:
+    """Check every field of a config dataclass against its spec; return it unchanged."""
+    for f in dataclasses.fields(config):
+        spec_of(f).check(f.name, getattr(config, f.name))
+    post = getattr(config, "validate", None)
+    if callable(post):
+        post()
+    return config
+
+
+def from_mapping(cls: type[T], values: Mapping[str, Any], *, strict: bool = True) -> T:
+    """Build a config dataclass from a mapping, coercing ints to floats where the default is float.
+
+    Unknown keys raise ConfigError when ``strict``; every value is validated against its spec.
+    """
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - set(names))
+    if unknown and strict:
+        raise ConfigError(f"unknown {cls.__name__} parameter(s): {', '.join(unknown)}")
+    kwargs = {}
+    defaults = cls()
+    for name, value in values.items():
+        if name not in names:
+            continue
+        default = getattr(defaults, name)
+        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if isinstance(default, tuple) and isinstance(value, list):
+            value = tuple(value)
+        kwargs[name] = value
+    return validate(cls(**kwargs))
+
+
+def load_yaml_parameters(path: str | Path, node_name: str | None = None) -> dict[str, Any]:
+    """Read a ROS 2 parameter file (``node: {ros__parameters: {...}}``) into a flat dict.
+
+    Takes the section of ``node_name`` (or ``/**``), or the first section when none is given.
+    """
+    data = yaml.safe_load(Path(path).read_text()) or {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: not a ROS 2 parameter file")
+    sections = {k.lstrip("/"): v for k, v in data.items()}
+    section = None
+    for key in ([node_name] if node_name else []) + ["**"]:
+        if key in sections:
+            section = sections[key]
+            break
+    if section is None:
+        section = next(iter(sections.values()), {})
+    params = (section or {}).get("ros__parameters", {})
+    return _flatten(params)
+
+
+def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def package_config_dir() -> Path:
+    """The installed ``share/aircraft_docking_tracker/config`` folder, else the source tree's."""
+    try:
+        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
+
+        candidate = Path(get_package_share_directory("aircraft_docking_tracker")) / "config"
+        if candidate.is_dir():
+            return candidate
+    except Exception:  # ament index absent (plain pip install) or package not registered
+        pass
+    return Path(__file__).resolve().parent.parent / "config"
+
+
+def add_config_arguments(parser, cls: type, prefix: str = "") -> None:
+    """Add one ``--name`` option per config field to an argparse parser (offline tools)."""
+    for f in dataclasses.fields(cls):
+        spec = spec_of(f)
+        default = getattr(cls(), f.name)
+        opt = "--" + (prefix + f.name).replace("_", "-")
+        kind = type(default)
+        if isinstance(default, bool):
+            parser.add_argument(opt, type=lambda s: s.lower() in ("1", "true", "yes", "on"), default=None,
+                                metavar="BOOL", help=f"{spec.description} (default {default})")
+        elif kind in (int, float, str):
+            parser.add_argument(opt, type=kind, default=None, choices=spec.choices,
+                                help=f"{spec.description} (default {default})")
+
+
+def config_from_arguments(cls: type[T], args, prefix: str = "", base: Mapping[str, Any] | None = None) -> T:
+    """Build a config from a YAML-derived mapping ``base`` overridden by parsed ``--name`` options."""
+    values = dict(base or {})
+    for f in dataclasses.fields(cls):
+        value = getattr(args, (prefix + f.name), None)
+        if value is not None:
+            values[f.name] = value
+    return from_mapping(cls, values, strict=False)

@@ -1,0 +1,31 @@
+"""Shared fixtures: the real data folder, an isolated ROS 2 domain per test session."""
+from __future__ import annotations
+
+import os
+import random
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+SHARED_DATA = Path(os.environ.get("ADT_SHARED_DATA", REPO.parent / "shared" / "data"))
+
+# One ROS domain per pytest process, chosen at random and kept on this host, so that parallel runs
+# on one machine (developers, CI) never see each other's topics.
+os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """``../shared/data``; skips the test with a clear reason where it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real data not found at {SHARED_DATA} (set ADT_SHARED_DATA)")
+    return SHARED_DATA
+
+
+def require_data(relative: str) -> Path:
+    path = SHARED_DATA / relative
+    if not path.exists():
+        pytest.skip(f"real data {relative} not found under {SHARED_DATA}")
+    return path

@@ -1,0 +1,47 @@
+"""The config dataclass machinery: ranges, choices, YAML files, argparse bridge."""
+import argparse
+from dataclasses import dataclass
+
+import pytest
+
+from aircraft_docking_tracker.config import (
+    ConfigError, add_config_arguments, config_from_arguments, from_mapping, load_yaml_parameters,
+    param, validate)
+
+
+@dataclass
+class Example:
+    rate: float = param(0.5, "a rate", low=0.0, high=1.0)
+    count: int = param(10, "a count", low=1, high=100)
+    mode: str = param("seed", "a mode", choices=("seed", "gated"))
+
+
+def test_defaults_validate():
+    assert validate(Example()).rate == 0.5
+
+
+@pytest.mark.parametrize("values, reason", [
+    ({"rate": 1.5}, "above its maximum"), ({"count": 0}, "below its minimum"),
+    ({"mode": "other"}, "not one of"), ({"rate": float("nan")}, "NaN"), ({"bogus": 1}, "unknown")])
+def test_bad_values_are_refused_with_a_reason(values, reason):
+    with pytest.raises(ConfigError, match=reason):
+        from_mapping(Example, values)
+
+
+def test_int_is_accepted_for_float_fields():
+    assert from_mapping(Example, {"rate": 1}).rate == 1.0
+
+
+def test_yaml_parameter_file(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text("my_node:\n  ros__parameters:\n    rate: 0.25\n    nested:\n      count: 3\n")
+    assert load_yaml_parameters(path, "my_node") == {"rate": 0.25, "nested.count": 3}
+    assert load_yaml_parameters(path) == {"rate": 0.25, "nested.count": 3}
+
+
+def test_argparse_bridge_overrides_yaml():
+    parser = argparse.ArgumentParser()
+    add_config_arguments(parser, Example)
+    args = parser.parse_args(["--count", "7"])
+    cfg = config_from_arguments(Example, args, base={"rate": 0.1})
+    assert (cfg.rate, cfg.count, cfg.mode) == (0.1, 7, "seed")
