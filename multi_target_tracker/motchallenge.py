@@ -1,0 +1,161 @@
+"""MOTChallenge text files: ``det.txt`` / ``gt.txt`` in, tracking results out (no ROS here).
+
+The one place in the repository that reads and writes the MOTChallenge format
+(Milan et al., "MOT16: A Benchmark for Multi-Object Tracking", arXiv:1603.00831, §3.3):
+
+    frame, id, bb_left, bb_top, bb_width, bb_height, conf, x|class, y|visibility, z
+
+one row per box, frames 1-based, boxes in pixels with (bb_left, bb_top) the top-left corner.
+``det.txt`` has ``id = -1`` and the detector score in ``conf``; ``gt.txt`` has the target id and in
+``conf`` a flag (0 = ignore this box in evaluation); MOT16+ also give the class in column 8.
+Results files use the ``det.txt`` layout with the track id and ``-1`` in columns 8-10.
+"""
+from __future__ import annotations
+
+import configparser
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+
+#: One MOTChallenge row. ``cls`` and ``visibility`` are -1 where the file does not give them.
+MOT_ROW_DTYPE = np.dtype([
+    ("frame", np.int32), ("id", np.int32),
+    ("x", np.float64), ("y", np.float64), ("w", np.float64), ("h", np.float64),
+    ("score", np.float64), ("cls", np.int32), ("visibility", np.float64),
+])
+
+
+class MotFormatError(ValueError):
+    """A MOTChallenge file that cannot be read (missing columns, non-numbers)."""
+
+
+def read_mot(path: str | Path) -> np.ndarray:
+    """Read a MOTChallenge ``det.txt`` / ``gt.txt`` / results file into ``MOT_ROW_DTYPE`` rows.
+
+    Commas or whitespace separate the columns; at least the first six are required.
+    Rows are returned sorted by frame (stable, so the file's order within a frame is kept).
+    """
+    path = Path(path)
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = line.replace(",", " ").split()
+        if len(fields) < 6:
+            raise MotFormatError(f"{path}:{number}: {len(fields)} columns, MOTChallenge needs at least 6")
+        try:
+            values = [float(v) for v in fields[:9]]
+        except ValueError as exc:
+            raise MotFormatError(f"{path}:{number}: {exc}") from None
+        values += [-1.0] * (9 - len(values))
+        if len(fields) < 7:
+            values[6] = 1.0
+        rows.append((int(values[0]), int(values[1]), *values[2:7], int(values[7]), values[8]))
+    table = np.array(rows, dtype=MOT_ROW_DTYPE)
+    return table[np.argsort(table["frame"], kind="stable")]
+
+
+def read_detections(path: str | Path, min_score: float | None = None) -> np.ndarray:
+    """``det.txt`` rows, keeping only those with ``score >= min_score`` when it is given."""
+    rows = read_mot(path)
+    if min_score is not None:
+        rows = rows[rows["score"] >= min_score]
+    return rows
+
+
+def read_ground_truth(path: str | Path, classes: Iterable[int] | None = None) -> np.ndarray:
+    """``gt.txt`` rows that count in evaluation: ``conf`` flag not 0, and class in ``classes``.
+
+    MOT15 files (TUD-Campus) have flag 1 and class -1 throughout, so everything is kept; MOT16+
+    files mark distractors with flag 0. ``classes=None`` keeps every class.
+    """
+    rows = read_mot(path)
+    rows = rows[rows["score"] != 0]
+    if classes is not None:
+        rows = rows[np.isin(rows["cls"], list(classes)) | (rows["cls"] == -1)]
+    return rows
+
+
+def boxes(rows: np.ndarray) -> np.ndarray:
+    """``(N, 4)`` float64 array ``x, y, w, h`` (top-left corner, pixels) of MOT rows."""
+    return np.stack([rows["x"], rows["y"], rows["w"], rows["h"]], axis=1).astype(np.float64)
+
+
+def frames(rows: np.ndarray, first: int | None = None, last: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """Yield ``(frame, rows of that frame)`` for every frame from ``first`` to ``last`` inclusive.
+
+    Frames without rows yield an empty array, so a tracker sees every frame (and its misses).
+    Defaults: 1 (MOTChallenge frames are 1-based) to the last frame present.
+    """
+    rows = rows[np.argsort(rows["frame"], kind="stable")]
+    first = 1 if first is None else int(first)
+    if last is None:
+        last = int(rows["frame"].max()) if len(rows) else first - 1
+    starts = np.searchsorted(rows["frame"], np.arange(first, last + 2))
+    for k, frame in enumerate(range(first, last + 1)):
+        yield frame, rows[starts[k]:starts[k + 1]]
+
+
+def read_seqinfo(path: str | Path) -> dict:
+    """The ``[Sequence]`` section of a ``seqinfo.ini`` as a dict (frameRate, seqLength as numbers).
+
+    ``path`` may be the file or the sequence folder; a missing file gives an empty dict.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "seqinfo.ini"
+    if not path.is_file():
+        return {}
+    parser = configparser.ConfigParser()
+    parser.optionxform = str
+    parser.read(path)
+    if "Sequence" not in parser:
+        return {}
+    info: dict = dict(parser["Sequence"])
+    for key in ("frameRate", "seqLength", "imWidth", "imHeight"):
+        if key in info:
+            info[key] = float(info[key]) if key == "frameRate" else int(info[key])
+    return info
+
+
+def make_rows(frame: int, ids: np.ndarray, xywh: np.ndarray, scores: np.ndarray | None = None) -> np.ndarray:
+    """Build ``MOT_ROW_DTYPE`` rows for one frame from ids and ``(N, 4)`` boxes (results, tests)."""
+    xywh = np.asarray(xywh, dtype=np.float64).reshape(-1, 4)
+    out = np.zeros(len(xywh), dtype=MOT_ROW_DTYPE)
+    out["frame"] = frame
+    out["id"] = np.asarray(ids).reshape(-1)
+    out["x"], out["y"], out["w"], out["h"] = xywh.T
+    out["score"] = 1.0 if scores is None else np.asarray(scores, dtype=np.float64).reshape(-1)
+    out["cls"] = -1
+    out["visibility"] = -1
+    return out
+
+
+def write_results(path: str | Path, rows: np.ndarray) -> None:
+    """Write tracking results in the MOTChallenge layout ``frame,id,x,y,w,h,conf,-1,-1,-1``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rows = rows[np.lexsort((rows["id"], rows["frame"]))]
+    with path.open("w") as out:
+        for r in rows:
+            out.write(f"{r['frame']},{r['id']},{r['x']:.2f},{r['y']:.2f},{r['w']:.2f},{r['h']:.2f},"
+                      f"{r['score']:.4g},-1,-1,-1\n")
+
+
+def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Intersection over union of every box in ``a`` (M, 4) with every box in ``b`` (N, 4), x,y,w,h.
+
+    Boxes with zero area have IoU 0 with everything. Returns an (M, N) float64 array.
+    """
+    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    ax0, ay0, ax1, ay1 = a[:, 0:1], a[:, 1:2], a[:, 0:1] + a[:, 2:3], a[:, 1:2] + a[:, 3:4]
+    bx0, by0, bx1, by1 = b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]
+    iw = np.clip(np.minimum(ax1, bx1) - np.maximum(ax0, bx0), 0.0, None)
+    ih = np.clip(np.minimum(ay1, by1) - np.maximum(ay0, by0), 0.0, None)
+    inter = iw * ih
+    union = a[:, 2:3] * a[:, 3:4] + b[:, 2] * b[:, 3] - inter
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
