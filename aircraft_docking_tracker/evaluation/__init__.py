@@ -1,0 +1,1 @@
+"""Evaluation: the field's metrics (OTB single target, MOT via motmetrics, detection rates), plots, `evaluate`."""
