@@ -1,0 +1,143 @@
+"""Message processors: the one code path from input messages to output messages.
+
+A node's whole behaviour, minus DDS, lives in a :class:`MessageProcessor`: it converts input
+messages, calls the algorithm core and builds output messages. The live node
+(``node_base.PerceptionNode.attach_processor``) and the offline runner (``offline.py``) both feed
+it through :func:`process_guarded`, so a bag replayed offline gives the same outputs as the live
+node, and bad input is handled the same way in both: a counted, reasoned rejection, never a crash.
+This module imports message types only, never ``rclpy.node``.
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from .bag import stamp_to_ns
+
+LOG = logging.getLogger(__name__)
+
+
+class Rejected(ValueError):
+    """Raised by a processor to refuse one input message; the text is the reason."""
+
+
+class MessageProcessor:
+    """Base class: declare topics, implement :meth:`process`.
+
+    ``inputs`` / ``outputs`` map relative topic names to type names (``sensor_msgs/msg/Image``).
+    Topics in ``latest_only`` (images) are delivered keep-newest with sensor-data QoS: under
+    overload the node skips stale frames and counts them; other inputs are processed in order.
+    """
+
+    inputs: dict[str, str] = {}
+    outputs: dict[str, str] = {}
+    latest_only: frozenset[str] = frozenset()
+
+    def process(self, topic: str, msg: Any) -> list[tuple[str, Any]]:
+        """Handle one input message; return ``(output topic, message)`` pairs to publish."""
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Forget all state (called when input time jumps backwards, e.g. a looped bag)."""
+
+    def status(self) -> dict[str, str]:
+        """Extra key/values for the diagnostics status (e.g. number of tracks)."""
+        return {}
+
+
+@dataclass
+class ProcessingStats:
+    """Counters behind ``/diagnostics``: rates, latency, skipped and rejected inputs."""
+
+    window_s: float = 5.0
+    received: int = 0
+    processed: int = 0
+    skipped: int = 0
+    time_jumps: int = 0
+    rejected: collections.Counter = field(default_factory=collections.Counter)
+    _events: collections.deque = field(default_factory=lambda: collections.deque(maxlen=2000))
+    _last_stamp: dict[str, int] = field(default_factory=dict)
+
+    def record(self, processing_s: float, age_s: float | None) -> None:
+        self.processed += 1
+        self._events.append((time.monotonic(), processing_s, age_s))
+
+    def reject(self, reason: str) -> None:
+        self.rejected[reason] += 1
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
+
+    def summary(self) -> dict[str, float]:
+        """Rate (Hz) and latency percentiles (ms) over the last ``window_s`` seconds."""
+        now = time.monotonic()
+        recent = [e for e in self._events if now - e[0] <= self.window_s]
+        out = {"rate_hz": 0.0, "processing_ms_p50": 0.0, "processing_ms_max": 0.0, "latency_ms_p50": 0.0}
+        if recent:
+            span = max(now - recent[0][0], 1e-3)
+            out["rate_hz"] = len(recent) / max(span, self.window_s if len(recent) < 2 else span)
+            proc = sorted(e[1] * 1e3 for e in recent)
+            out["processing_ms_p50"] = proc[len(proc) // 2]
+            out["processing_ms_max"] = proc[-1]
+            ages = sorted(e[2] * 1e3 for e in recent if e[2] is not None)
+            if ages:
+                out["latency_ms_p50"] = ages[len(ages) // 2]
+        return out
+
+
+def message_stamp_ns(msg: Any) -> int | None:
+    header = getattr(msg, "header", None)
+    return stamp_to_ns(header.stamp) if header is not None else None
+
+
+def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: ProcessingStats,
+                    now_ns: Callable[[], int] | None = None,
+                    on_error: Callable[[str], None] | None = None) -> list[tuple[str, Any]]:
+    """Run ``processor.process`` with the rules every node shares.
+
+    * a stamp older than the last one on the same topic (a looped bag, a restarted player) is a
+      time jump: counted, the processor is reset, and the message is processed as a fresh start;
+    * ``ValueError`` (``Rejected``, ``ImageConversionError``, ...) rejects the message with its
+      reason; any other exception is an internal error, logged with its traceback and counted;
+    * processing time and stamp-to-output latency (with ``now_ns``, the node's clock) are recorded.
+    """
+    stats.received += 1
+    stamp = message_stamp_ns(msg)
+    if stamp is not None:
+        last = stats._last_stamp.get(topic)
+        if last is not None and stamp < last:
+            stats.time_jumps += 1
+            processor.reset()
+            stats._last_stamp.clear()
+        stats._last_stamp[topic] = stamp
+    started = time.perf_counter()
+    try:
+        outputs = processor.process(topic, msg)
+    except ValueError as exc:
+        reason = f"{topic}: {exc}"
+        stats.reject(_reason_key(reason))
+        if on_error:
+            on_error(reason)
+        return []
+    except Exception as exc:  # a bug must not take the node or the recording down
+        reason = f"{topic}: internal error {type(exc).__name__}: {exc}"
+        stats.reject(_reason_key(reason))
+        LOG.error("%s\n%s", reason, traceback.format_exc())
+        if on_error:
+            on_error(reason)
+        return []
+    age = None
+    if stamp is not None and now_ns is not None:
+        age = max(0.0, (now_ns() - stamp) / 1e9)
+    stats.record(time.perf_counter() - started, age)
+    return outputs
+
+
+def _reason_key(reason: str, limit: int = 120) -> str:
+    """Reasons are counted by kind: cut numbers-heavy tails so the counter stays small."""
+    return reason if len(reason) <= limit else reason[:limit] + "..."

@@ -1,0 +1,154 @@
+"""PerceptionNode: parameters with ranges, processors, keep-newest frames, rejections, diagnostics."""
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Point32, PolygonStamped
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Image
+
+from aircraft_docking_tracker.bag import ns_to_stamp
+from aircraft_docking_tracker.config import param
+from aircraft_docking_tracker.images import numpy_to_image, to_mono8
+from aircraft_docking_tracker.node_base import PerceptionNode
+from aircraft_docking_tracker.processing import MessageProcessor, ProcessingStats, process_guarded
+
+from ros_helpers import ros_context, spin_until, wait_for_subscribers
+
+pytestmark = pytest.mark.ros
+
+
+@dataclass
+class ToyConfig:
+    threshold: float = param(0.5, "brightness threshold", low=0.0, high=1.0)
+    delay_s: float = param(0.0, "artificial processing time", low=0.0, high=1.0)
+    mode: str = param("mean", "statistic", choices=("mean", "max"))
+    box: tuple = param((), "optional box [x, y, w, h]")
+
+
+class ToyProcessor(MessageProcessor):
+    """Publishes the image's bright-pixel fraction as a polygon x coordinate."""
+
+    inputs = {"image": "sensor_msgs/msg/Image"}
+    outputs = {"out": "geometry_msgs/msg/PolygonStamped"}
+    latest_only = frozenset({"image"})
+
+    def __init__(self, config):
+        self.config = config
+        self.resets = 0
+
+    def process(self, topic, msg):
+        grey = to_mono8(msg)
+        time.sleep(self.config.delay_s)
+        poly = PolygonStamped()
+        poly.header = msg.header
+        poly.polygon.points = [Point32(x=float((grey > 255 * self.config.threshold).mean()))]
+        return [("out", poly)]
+
+    def reset(self):
+        self.resets += 1
+
+
+class ToyNode(PerceptionNode):
+    def __init__(self, **kwargs):
+        super().__init__("toy", **kwargs)
+        self.attach_processor(ToyProcessor(self.declare_config(ToyConfig)))
+
+    def on_config_changed(self, cfg):
+        self.processor.config = cfg
+
+
+def image(value: int, stamp_ns: int, encoding="mono8"):
+    msg = numpy_to_image(np.full((4, 4), value, np.uint8), encoding)
+    msg.header.stamp, msg.header.frame_id = ns_to_stamp(stamp_ns), "cam"
+    return msg
+
+
+def test_parameters_refuse_bad_values_and_apply_good_ones():
+    with ros_context() as (ctx, executor):
+        node = ToyNode(context=ctx, parameter_overrides=[Parameter("threshold", value=7.0)])
+        try:
+            assert node.config().threshold == 0.5  # out-of-range override refused, default kept
+            result = node.set_parameters([Parameter("threshold", value=1.5)])[0]
+            assert not result.successful
+            result = node.set_parameters([Parameter("mode", value="median")])[0]
+            assert not result.successful and "not one of" in result.reason
+            assert node.set_parameters([Parameter("threshold", value=0.25)])[0].successful
+            assert node.processor.config.threshold == 0.25
+            descriptor = node.describe_parameter("threshold")
+            assert descriptor.floating_point_range[0].to_value == 1.0 and "brightness" in descriptor.description
+            assert node.set_parameters([Parameter("box", value=[1.0, 2.0, 3.0, 4.0])])[0].successful
+            assert node.processor.config.box == (1.0, 2.0, 3.0, 4.0)
+        finally:
+            node.destroy_node()
+
+
+def test_live_processing_rejections_and_diagnostics():
+    with ros_context() as (ctx, executor):
+        node = ToyNode(context=ctx)
+        probe = rclpy.create_node("probe", context=ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        got, diags = [], []
+        probe.create_subscription(PolygonStamped, "out", got.append, 10)
+        probe.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+        pub = probe.create_publisher(Image, "image", qos_profile_sensor_data)
+        try:
+            assert wait_for_subscribers(executor, pub)
+            bad = image(0, 5)
+            bad.encoding = "bgr9"
+            pub.publish(bad)
+            assert spin_until(executor, lambda: node.stats.rejected_total == 1)
+            pub.publish(image(255, 10))
+            assert spin_until(executor, lambda: len(got) == 1)
+            assert got[0].header.frame_id == "cam" and got[0].header.stamp.nanosec == 10
+            assert got[0].polygon.points[0].x == 1.0
+            assert spin_until(executor, lambda: any(d.status[0].values for d in diags), timeout_s=5)
+            values = {kv.key: kv.value for kv in diags[-1].status[0].values}
+            assert values["rejected"] == "1" and values["processed"] == "1"
+            assert any("unknown image encoding" in k for k in values)
+        finally:
+            node.destroy_node()
+            probe.destroy_node()
+
+
+def test_overload_keeps_the_newest_frame_and_counts_skipped():
+    with ros_context() as (ctx, executor):
+        node = ToyNode(context=ctx, parameter_overrides=[Parameter("delay_s", value=0.2)])
+        probe = rclpy.create_node("probe", context=ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        got = []
+        probe.create_subscription(PolygonStamped, "out", got.append, 50)
+        pub = probe.create_publisher(Image, "image", qos_profile_sensor_data)
+        try:
+            assert wait_for_subscribers(executor, pub)
+            for i in range(10):
+                pub.publish(image(255, 1000 + i))
+                executor.spin_once(timeout_sec=0.01)
+            # the newest frame always comes out; the ones replaced while busy are counted
+            assert spin_until(executor, lambda: got and got[-1].header.stamp.nanosec == 1009, timeout_s=10)
+            assert node.stats.skipped >= 3, node.stats
+            assert len(got) == node.stats.processed < 10
+        finally:
+            node.destroy_node()
+            probe.destroy_node()
+
+
+def test_guard_resets_on_time_jump_and_survives_internal_errors():
+    class Fragile(ToyProcessor):
+        def process(self, topic, msg):
+            if msg.header.stamp.nanosec == 99:
+                raise RuntimeError("boom")
+            return super().process(topic, msg)
+
+    proc, stats = Fragile(ToyConfig()), ProcessingStats()
+    assert process_guarded(proc, "image", image(1, 50), stats)
+    assert process_guarded(proc, "image", image(1, 20), stats)  # backwards: a looped bag
+    assert stats.time_jumps == 1 and proc.resets == 1
+    assert process_guarded(proc, "image", image(1, 99), stats) == []
+    assert any("internal error RuntimeError: boom" in r for r in stats.rejected)
