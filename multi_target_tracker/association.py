@@ -1,0 +1,433 @@
+"""Multi-target association: seed 003 §3.2-3.3 (eqs. 7-13) around the Kalman filters (no ROS here).
+
+One frame (:meth:`MultiTargetTracker.step`):
+
+1. check the detections (NaN, inf, non-positive size are dropped and counted);
+2. T from the time stamps; predict every target (eqs. 5-6, :mod:`kalman`);
+3. the cost of eqs. 8-10: ``c_ij = θ_ij / max θ + r_ij / max r`` where r_ij is the distance from
+   target i's predicted position to detection j and θ_ij the angle between target i's velocity
+   and the vector from target i's (last estimated) position to detection j;
+4. padding with zero rows or columns to a square matrix (eqs. 11-12) and the Hungarian algorithm
+   (eq. 13, ``scipy.optimize.linear_sum_assignment``);
+5. track management of §3.3: an assignment with ``c_ij > c_t`` counts as none (rule 2); a target
+   without a detection is updated with its prediction and its missed counter grows (rule 1), and
+   is deleted when the counter exceeds ``f_t``; an assigned target is updated with its detection
+   and its counter reset (rule 3); a detection assigned to no target starts a tentative track
+   that becomes a target when its length reaches ``l_t`` (rule 4) and is otherwise dropped as a
+   false alarm. IDs are never reused.
+
+Choices the seed leaves open (named here, in the config, and measured in ``bench/association.py``):
+
+* *No velocity yet.* A target whose speed is below ``still_speed`` (a new target, or one standing
+  still) gives no direction evidence, so its θ_ij is 0 for every detection: its cost is the
+  distance term alone. Likewise θ = 0 when the detection sits exactly on the target.
+* *Track length* (rule 4) is the number of frames with an assigned detection; a tentative track
+  obeys rule 1 with its own limit ``tentative_max_misses`` (default ``f_t``, as the seed does not
+  distinguish).
+* *Degenerate maxima.* Where max θ or max r over the matrix is 0, that term is 0.
+
+Beyond the seed, each selectable and off by default:
+
+* ``gate="mahalanobis"``: the acceptance test of rule 2 becomes the absolute test
+  ``d² = (z − Hx̂)ᵀ S⁻¹ (z − Hx̂) ≤ mahalanobis_gate`` from the filter's innovation covariance S;
+  pairs outside it are excluded before normalising, so one far clutter detection cannot rescale
+  every cost. (With the seed's normalisation a lone target and a lone detection always cost
+  1 + 1 = 2 > c_t and are never associated; the absolute gate removes that.)
+* ``iou_weight``: adds ``w (1 − IoU)`` between the predicted box and the detection to the cost.
+* ``second_pass``: ByteTrack's idea (Zhang et al., ECCV 2022): detections with score below
+  ``high_score`` are kept out of the first association and offered in a second one to the
+  targets left without a detection; they never start tracks.
+* ``reacquire_frames``: a target deleted by rule 1 is kept as *lost* this many frames more; a new
+  detection near its prediction (within ``reacquire_radius`` box diagonals) re-confirms it with
+  its old ID instead of starting a tentative track.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from aircraft_docking_tracker.config import param, validate
+from multi_target_tracker.kalman import KalmanBank, KalmanConfig
+from multi_target_tracker.motchallenge import iou_matrix
+
+TENTATIVE, CONFIRMED, COASTING, LOST = 0, 1, 2, 3
+#: Cost of a pair that a gate excludes; larger than any real cost so the Hungarian avoids it.
+EXCLUDED = 1e6
+
+
+class AssociationError(ValueError):
+    """Input the association core cannot use (wrong array shapes)."""
+
+
+@dataclass
+class AssociationConfig:
+    """§3.3 thresholds (seed §4.1 values) and the selectable improvements."""
+
+    max_misses: int = param(10, "f_t: a target is deleted when its missed-frame counter exceeds this (§3.3 rule 1)",
+                            low=0, high=100000)
+    cost_gate: float = param(0.3, "c_t: an assignment costing more counts as no detection (§3.3 rule 2)",
+                             low=0.0, high=10.0)
+    confirm_length: int = param(15, "l_t: a tentative track becomes a target at this many detections (§3.3 rule 4)",
+                                low=1, high=100000)
+    tentative_max_misses: int = param(10, "a tentative track is dropped when its missed counter exceeds this",
+                                      low=0, high=100000)
+    still_speed: float = param(1.0, "below this speed [px/s] a target has no direction: θ = 0 for it",
+                               low=0.0, high=1e6)
+    min_score: float = param(0.0, "detections scoring below this are ignored", low=-1e9, high=1e9)
+    max_frame_gap: float = param(5.0, "a stamp jumping forward more than this [s] (or backwards) resets all tracks",
+                                 low=0.0, high=1e9)
+    default_frame_interval: float = param(1.0 / 30.0, "T [s] used when stamps do not advance", low=1e-6, high=10.0)
+    gate: str = param("cost", "acceptance: 'cost' is c_ij <= c_t (seed rule 2); 'mahalanobis' is "
+                      "d² <= mahalanobis_gate with normalisation over the gated pairs only",
+                      choices=("cost", "mahalanobis"))
+    mahalanobis_gate: float = param(9.21, "χ² threshold of the Mahalanobis gate (2 dof; 9.21 = 99 %)",
+                                    low=0.0, high=1e6)
+    iou_weight: float = param(0.0, "weight of (1 - IoU) of predicted box and detection added to the cost",
+                              low=0.0, high=100.0)
+    second_pass: bool = param(False, "ByteTrack: associate detections scoring below high_score in a second pass")
+    high_score: float = param(0.5, "score splitting first-pass from second-pass detections", low=-1e9, high=1e9)
+    reacquire_frames: int = param(0, "frames a deleted target is kept as lost for re-confirmation (0: seed, off)",
+                                  low=0, high=100000)
+    reacquire_radius: float = param(1.0, "re-confirmation radius around a lost target's prediction [box diagonals]",
+                                    low=0.0, high=100.0)
+    history_length: int = param(30, "positions kept per track (trails; tentative history for offline backfill)",
+                                low=1, high=100000)
+
+
+@dataclass
+class Tracks:
+    """The targets after one frame, one entry per track (all states), in the filter bank's order."""
+
+    ids: np.ndarray          # int
+    boxes: np.ndarray        # (N, 4) x, y, w, h [px], top-left corner
+    velocities: np.ndarray   # (N, 2) [px/s]
+    scores: np.ndarray       # score of the last assigned detection
+    class_ids: np.ndarray
+    ages: np.ndarray         # frames since the track started
+    hits: np.ndarray         # frames with an assigned detection (track length of rule 4)
+    misses: np.ndarray       # missed-frame counter of rule 1
+    states: np.ndarray       # TENTATIVE, CONFIRMED, COASTING, LOST
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def select(self, mask: np.ndarray) -> "Tracks":
+        return Tracks(**{k: v[mask] for k, v in self.__dict__.items()})
+
+    def visible(self, include_tentative: bool = False, include_coasting: bool = True) -> "Tracks":
+        """Tracks to show: confirmed, optionally coasting and tentative; lost ones never."""
+        mask = self.states == CONFIRMED
+        if include_coasting:
+            mask |= self.states == COASTING
+        if include_tentative:
+            mask |= self.states == TENTATIVE
+        return self.select(mask)
+
+
+@dataclass
+class FrameResult:
+    tracks: Tracks
+    rejected: int = 0                 # detections dropped as invalid (NaN, inf, size <= 0)
+    reset: bool = False               # stamps went backwards or jumped: every track was dropped
+    confirmed_now: list = field(default_factory=list)  # ids that became targets in this frame (rule 4)
+    frame_index: int = 0              # how many frames the core has seen, this one included
+
+
+# --------------------------------------------------------------------------------------------
+# Eqs. 8-12: the cost matrix and its padding
+# --------------------------------------------------------------------------------------------
+def angle_matrix(positions: np.ndarray, velocities: np.ndarray, points: np.ndarray,
+                 still_speed: float) -> np.ndarray:
+    """θ_ij of eq. 8: angle [rad] between target i's velocity and the vector from target i to point j.
+
+    θ = 0 for a target slower than ``still_speed`` (no direction yet) and for a point on the target.
+    """
+    u = points[None, :, :] - positions[:, None, :]                     # (m, n, 2)
+    dot = np.einsum("mnk,mk->mn", u, velocities)
+    norms = np.linalg.norm(u, axis=2) * np.linalg.norm(velocities, axis=1)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.where(norms > 0, dot / np.where(norms > 0, norms, 1.0), 1.0)
+    theta = np.arccos(np.clip(cos, -1.0, 1.0))
+    theta[np.linalg.norm(velocities, axis=1) < still_speed, :] = 0.0
+    return theta
+
+
+def normalise_by_max(values: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """Eqs. 8-9: divide by the maximum over the matrix (over ``mask`` only when given); 0 if it is 0."""
+    pool = values if mask is None else values[mask]
+    top = float(pool.max()) if pool.size else 0.0
+    return values / top if top > 0 else np.zeros_like(values)
+
+
+def seed_cost(positions, predicted, velocities, points, still_speed, mask=None) -> np.ndarray:
+    """Eq. 10: ``c_ij = θ_ij / max θ + r_ij / max r`` (maxima over ``mask`` when given)."""
+    theta = angle_matrix(positions, velocities, points, still_speed)
+    r = np.linalg.norm(points[None, :, :] - predicted[:, None, :], axis=2)
+    return normalise_by_max(theta, mask) + normalise_by_max(r, mask)
+
+
+def mahalanobis_squared(predicted: np.ndarray, S: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """d²_ij = (z_j − Hx̂_i)ᵀ S_i⁻¹ (z_j − Hx̂_i) for every target i and detection j."""
+    diff = points[None, :, :] - predicted[:, None, :]                  # (m, n, 2)
+    S_inv = np.linalg.inv(S)                                           # (m, 2, 2)
+    return np.einsum("mnk,mkl,mnl->mn", diff, S_inv, diff)
+
+
+def pad_square(cost: np.ndarray) -> np.ndarray:
+    """Eqs. 11-12: append zero-cost dummy detections (m > n) or dummy targets (m < n)."""
+    m, n = cost.shape
+    k = max(m, n)
+    padded = np.zeros((k, k), dtype=cost.dtype)
+    padded[:m, :n] = cost
+    return padded
+
+
+def hungarian(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 13 on the padded matrix; returns the (target, detection) pairs between real rows and columns."""
+    m, n = cost.shape
+    if m == 0 or n == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    rows, cols = linear_sum_assignment(pad_square(cost))
+    real = (rows < m) & (cols < n)
+    return rows[real], cols[real]
+
+
+# --------------------------------------------------------------------------------------------
+# Input checks
+# --------------------------------------------------------------------------------------------
+def valid_detections(boxes: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """Mask of usable detections: finite numbers and positive width and height."""
+    finite = np.isfinite(boxes).all(axis=1) & np.isfinite(scores)
+    return finite & (boxes[:, 2] > 0) & (boxes[:, 3] > 0)
+
+
+def _as_inputs(boxes, scores, class_ids):
+    boxes = np.asarray(boxes, dtype=np.float64)
+    if boxes.size == 0:
+        boxes = boxes.reshape(0, 4)
+    if boxes.ndim != 2 or boxes.shape[1] != 4:
+        raise AssociationError(f"detection boxes must be (N, 4) x, y, w, h, got shape {boxes.shape}")
+    n = len(boxes)
+    scores = np.ones(n) if scores is None else np.asarray(scores, dtype=np.float64).reshape(-1)
+    class_ids = np.zeros(n, dtype=np.int64) if class_ids is None else np.asarray(class_ids).reshape(-1)
+    if len(scores) != n or len(class_ids) != n:
+        raise AssociationError(f"{n} boxes but {len(scores)} scores and {len(class_ids)} class ids")
+    return boxes, scores, class_ids
+
+
+# --------------------------------------------------------------------------------------------
+# The tracker
+# --------------------------------------------------------------------------------------------
+class MultiTargetTracker:
+    """Kalman filters + Hungarian association + §3.3 track management, one :meth:`step` per frame."""
+
+    def __init__(self, config: AssociationConfig | None = None, kalman: KalmanConfig | None = None):
+        self.config = validate(config or AssociationConfig())
+        self.kalman_config = validate(kalman or KalmanConfig())
+        self.next_id = 1
+        self.frame_index = 0
+        self.last_stamp: float | None = None
+        self._clear()
+
+    def _clear(self) -> None:
+        self.bank = KalmanBank(self.kalman_config)
+        self.ids = np.zeros(0, dtype=np.int64)
+        self.states = np.zeros(0, dtype=np.int64)
+        self.hits = np.zeros(0, dtype=np.int64)
+        self.misses = np.zeros(0, dtype=np.int64)
+        self.ages = np.zeros(0, dtype=np.int64)
+        self.scores = np.zeros(0)
+        self.class_ids = np.zeros(0, dtype=np.int64)
+        self.history: list[deque] = []   # per track: (frame_index, x, y, w, h, matched)
+
+    def reset(self) -> None:
+        """Drop every track (IDs keep counting up: never reused)."""
+        self._clear()
+        self.last_stamp = None
+
+    # -- one frame ----------------------------------------------------------------------------
+    def step(self, stamp: float, boxes, scores=None, class_ids=None) -> FrameResult:
+        """Process the detections (x, y, w, h boxes, scores, class ids) of the frame at ``stamp`` [s]."""
+        cfg = self.config
+        boxes, scores, class_ids = _as_inputs(boxes, scores, class_ids)
+        ok = valid_detections(boxes, scores)
+        rejected = int((~ok).sum())
+        ok &= scores >= cfg.min_score
+        boxes, scores, class_ids = boxes[ok], scores[ok], class_ids[ok]
+
+        T, was_reset = self._frame_interval(stamp)
+        self.frame_index += 1
+        previous = self.bank.positions.copy()          # last estimates: origin of θ's vectors (Fig. 1)
+        if len(self.bank) and T > 0:
+            self.bank.predict(T)
+        self.ages += 1
+
+        centres = boxes[:, :2] + boxes[:, 2:] / 2.0
+        active = np.flatnonzero(self.states != LOST)
+        if cfg.second_pass:
+            first = np.flatnonzero(scores >= cfg.high_score)
+            second = np.flatnonzero(scores < cfg.high_score)
+        else:
+            first, second = np.arange(len(boxes)), np.zeros(0, dtype=np.intp)
+
+        # First association: every active target against the (high-score) detections.
+        t1, d1 = self._associate(active, first, previous, centres, boxes)
+        matched_t, matched_d = [active[t1]], [first[d1]]
+        # Second association (ByteTrack): targets left over against the low-score detections.
+        if len(second):
+            left = np.setdiff1d(active, matched_t[0])
+            left = left[self.states[left] != TENTATIVE]
+            t2, d2 = self._associate(left, second, previous, centres, boxes)
+            matched_t.append(left[t2])
+            matched_d.append(second[d2])
+        # Unmatched first-pass detections may re-confirm lost targets, else start tentative tracks.
+        unmatched = np.setdiff1d(first, np.concatenate(matched_d))
+        if cfg.reacquire_frames > 0 and len(unmatched):
+            t3, d3 = self._reacquire(unmatched, centres)
+            matched_t.append(t3)
+            matched_d.append(d3)
+            unmatched = np.setdiff1d(unmatched, d3)
+        rows = np.concatenate(matched_t).astype(np.intp)
+        dets = np.concatenate(matched_d).astype(np.intp)
+
+        # Rule 3: assigned targets are updated with their detections; the counter is reset.
+        self.bank.update(rows, centres[dets], boxes[dets, 2:])
+        self.hits[rows] += 1
+        self.misses[rows] = 0
+        self.scores[rows] = scores[dets]
+        self.class_ids[rows] = class_ids[dets]
+        # Rule 1 (and rule 2's rejected assignments): update with the prediction, count the miss.
+        missed = np.setdiff1d(np.arange(len(self.bank)), rows)
+        self.bank.coast(missed)
+        self.misses[missed] += 1
+        confirmed_now = self._update_states(rows, missed)
+        self._record(rows, missed)
+        self._delete()
+        self._start(boxes[unmatched], scores[unmatched], class_ids[unmatched])
+        return FrameResult(self.tracks(), rejected, was_reset, confirmed_now, self.frame_index)
+
+    def _frame_interval(self, stamp: float) -> tuple[float, bool]:
+        """T of eq. 6 from the stamps; a stamp going backwards or jumping resets the tracker."""
+        if stamp != stamp or stamp in (float("inf"), float("-inf")):
+            raise AssociationError(f"stamp {stamp} is not a finite number of seconds")
+        cfg = self.config
+        was_reset = False
+        if self.last_stamp is None:
+            T = 0.0
+        else:
+            T = stamp - self.last_stamp
+            if T < 0 or T > cfg.max_frame_gap:
+                self.reset()
+                was_reset, T = True, 0.0
+            elif T == 0:
+                T = cfg.default_frame_interval
+        self.last_stamp = stamp
+        return T, was_reset
+
+    def _associate(self, targets: np.ndarray, detections: np.ndarray, previous: np.ndarray,
+                   centres: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Cost (eqs. 8-10, options), padding and Hungarian (eqs. 11-13), gate (rule 2).
+
+        Returns indices into ``targets`` and ``detections`` of the accepted pairs.
+        """
+        cfg = self.config
+        if len(targets) == 0 or len(detections) == 0:
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        points = centres[detections]
+        predicted = self.bank.positions[targets]
+        origin = previous[targets]                     # every target existed before this frame's births
+        allowed = None
+        if cfg.gate == "mahalanobis":
+            d2 = mahalanobis_squared(predicted, self.bank.innovation_covariance()[targets], points)
+            allowed = d2 <= cfg.mahalanobis_gate
+        cost = seed_cost(origin, predicted, self.bank.velocities[targets], points, cfg.still_speed, allowed)
+        if cfg.iou_weight > 0:
+            cost += cfg.iou_weight * (1.0 - iou_matrix(self.bank.boxes()[targets], boxes[detections]))
+        if allowed is not None:
+            cost[~allowed] = EXCLUDED
+        t, d = hungarian(cost)
+        accept = allowed[t, d] if allowed is not None else cost[t, d] <= cfg.cost_gate
+        return t[accept], d[accept]
+
+    def _reacquire(self, detections: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lost targets against unmatched detections: distance in box diagonals, Hungarian, radius gate."""
+        lost = np.flatnonzero(self.states == LOST)
+        if len(lost) == 0:
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        diagonal = np.linalg.norm(self.bank.size[lost], axis=1)
+        dist = np.linalg.norm(centres[detections][None] - self.bank.positions[lost][:, None], axis=2)
+        dist = dist / np.maximum(diagonal, 1e-9)[:, None]
+        t, d = hungarian(dist)
+        accept = dist[t, d] <= self.config.reacquire_radius
+        return lost[t[accept]], detections[d[accept]]
+
+    def _update_states(self, rows: np.ndarray, missed: np.ndarray) -> list:
+        """Rule 4 (tentative → confirmed at l_t hits), coasting on misses, lost after f_t."""
+        cfg = self.config
+        confirmed_now = []
+        for i in rows:
+            if self.states[i] == TENTATIVE:
+                if self.hits[i] >= cfg.confirm_length:
+                    self.states[i] = CONFIRMED
+                    confirmed_now.append(int(self.ids[i]))
+            else:
+                self.states[i] = CONFIRMED
+        coasting = missed[(self.states[missed] == CONFIRMED)]
+        self.states[coasting] = COASTING
+        gone = missed[(self.states[missed] == COASTING) & (self.misses[missed] > cfg.max_misses)]
+        self.states[gone] = LOST
+        return confirmed_now
+
+    def _record(self, rows: np.ndarray, missed: np.ndarray) -> None:
+        boxes = self.bank.boxes()
+        matched = np.zeros(len(boxes), dtype=bool)
+        matched[rows] = True
+        for i, h in enumerate(self.history):
+            h.append((self.frame_index, *boxes[i], bool(matched[i])))
+
+    def _delete(self) -> None:
+        """Rule 1 / rule 4 deletions: tentative tracks past their limit, lost ones past re-acquisition."""
+        cfg = self.config
+        drop = (self.states == TENTATIVE) & (self.misses > cfg.tentative_max_misses)
+        drop |= (self.states == LOST) & (self.misses > cfg.max_misses + cfg.reacquire_frames)
+        if drop.any():
+            keep = ~drop
+            self.bank.keep(keep)
+            for name in ("ids", "states", "hits", "misses", "ages", "scores", "class_ids"):
+                setattr(self, name, getattr(self, name)[keep])
+            self.history = [h for h, k in zip(self.history, keep) if k]
+
+    def _start(self, boxes: np.ndarray, scores: np.ndarray, class_ids: np.ndarray) -> None:
+        """Rule 4: every unassigned detection starts a tentative track with a fresh ID."""
+        k = len(boxes)
+        if k == 0:
+            return
+        self.bank.add(boxes)
+        self.ids = np.concatenate([self.ids, np.arange(self.next_id, self.next_id + k)])
+        self.next_id += k
+        confirmed = self.config.confirm_length <= 1
+        self.states = np.concatenate([self.states, np.full(k, CONFIRMED if confirmed else TENTATIVE)])
+        self.hits = np.concatenate([self.hits, np.ones(k, dtype=np.int64)])
+        self.misses = np.concatenate([self.misses, np.zeros(k, dtype=np.int64)])
+        self.ages = np.concatenate([self.ages, np.ones(k, dtype=np.int64)])
+        self.scores = np.concatenate([self.scores, scores])
+        self.class_ids = np.concatenate([self.class_ids, class_ids.astype(np.int64)])
+        maxlen = max(self.config.history_length, self.config.confirm_length + self.config.tentative_max_misses + 1)
+        for b in boxes:
+            self.history.append(deque([(self.frame_index, *b, True)], maxlen=maxlen))
+
+    # -- read-out -----------------------------------------------------------------------------
+    def tracks(self) -> Tracks:
+        return Tracks(self.ids.copy(), self.bank.boxes(), self.bank.velocities.copy(), self.scores.copy(),
+                      self.class_ids.copy(), self.ages.copy(), self.hits.copy(), self.misses.copy(),
+                      self.states.copy())
+
+    def trail(self, track_id: int) -> np.ndarray:
+        """The recorded ``(frame_index, x, y, w, h, matched)`` rows of one track (oldest first)."""
+        where = np.flatnonzero(self.ids == track_id)
+        if len(where) == 0:
+            return np.zeros((0, 6))
+        return np.array(self.history[where[0]], dtype=np.float64).reshape(-1, 6)

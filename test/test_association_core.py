@@ -1,0 +1,223 @@
+"""Association core: eqs. 8-12 by hand, each rule of seed 003 §3.3 on a scripted scene, the options."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from multi_target_tracker.association import (COASTING, CONFIRMED, LOST, TENTATIVE, AssociationConfig,
+                                              AssociationError, MultiTargetTracker, angle_matrix, hungarian,
+                                              normalise_by_max, pad_square, seed_cost)
+from multi_target_tracker.kalman import KalmanConfig
+
+FPS = 10.0
+KALMAN = KalmanConfig(acceleration_noise=50.0, measurement_noise=1.0, initial_velocity_std=100.0)
+
+
+def box(cx, cy, w=10.0, h=10.0):
+    return [cx - w / 2, cy - h / 2, w, h]
+
+
+def run(tracker, frames):
+    """frames: list of lists of boxes; returns the FrameResult of every frame."""
+    return [tracker.step(k / FPS, np.array(b, dtype=float).reshape(-1, 4)) for k, b in enumerate(frames)]
+
+
+def state_of(result, track_id):
+    t = result.tracks
+    return int(t.states[t.ids == track_id][0]) if (t.ids == track_id).any() else None
+
+
+# -- eqs. 8-12 --------------------------------------------------------------------------------
+def test_angle_and_normalised_cost_by_hand():
+    positions = np.array([[0.0, 0.0], [10.0, 0.0]])
+    velocities = np.array([[1.0, 0.0], [0.0, 0.0]])           # second target: no velocity yet
+    points = np.array([[1.0, 1.0], [-2.0, 0.0]])
+    theta = angle_matrix(positions, velocities, points, still_speed=0.5)
+    np.testing.assert_allclose(theta[0], [np.pi / 4, np.pi])
+    np.testing.assert_allclose(theta[1], [0.0, 0.0])            # documented choice: θ = 0 without velocity
+    predicted = positions + [[1.0, 0.0], [0.0, 0.0]]
+    cost = seed_cost(positions, predicted, velocities, points, 0.5)
+    r = np.linalg.norm(points[None] - predicted[:, None], axis=2)
+    np.testing.assert_allclose(cost, theta / np.pi + r / r.max())
+    assert normalise_by_max(np.zeros((2, 2))).max() == 0.0
+
+
+def test_padding_shapes_and_zero_dummies():
+    wide = np.arange(6, dtype=float).reshape(2, 3) + 1
+    tall = np.arange(6, dtype=float).reshape(3, 2) + 1
+    assert pad_square(wide).shape == (3, 3) and pad_square(tall).shape == (3, 3)
+    np.testing.assert_array_equal(pad_square(wide)[2], 0)     # eq. 12: n - m dummy targets
+    np.testing.assert_array_equal(pad_square(tall)[:, 2], 0)  # eq. 11: m - n dummy detections
+    np.testing.assert_array_equal(pad_square(wide)[:2], wide)
+    t, d = hungarian(np.array([[5.0, 1.0, 9.0], [1.0, 9.0, 9.0]]))
+    assert sorted(zip(t.tolist(), d.tolist())) == [(0, 1), (1, 0)]
+    t, d = hungarian(np.zeros((0, 3)))
+    assert len(t) == 0
+
+
+# -- §3.3 rules ---------------------------------------------------------------------------------
+def three_targets(k, dx=2.0):
+    """Three targets far apart moving right, so the seed's matrix-normalised cost has a scale."""
+    return [box(20 + dx * k, 20), box(20 + dx * k, 200), box(300 + dx * k, 100)]
+
+
+def test_tentative_confirmed_at_lt_and_clutter_dropped():
+    cfg = AssociationConfig(confirm_length=4, tentative_max_misses=1)
+    tracker = MultiTargetTracker(cfg, KALMAN)
+    frames = [three_targets(k) for k in range(8)]
+    frames[0] = frames[0] + [box(150, 300)]                    # one clutter detection, frame 0 only
+    results = run(tracker, frames)
+    clutter_id = 4
+    assert state_of(results[0], clutter_id) == TENTATIVE
+    assert state_of(results[2], clutter_id) is None             # dropped after more than 1 miss
+    assert state_of(results[2], 1) == TENTATIVE                 # 3 detections so far
+    assert results[3].confirmed_now == [1, 2, 3]                # rule 4: length reaches l_t = 4
+    assert all(state_of(results[3], i) == CONFIRMED for i in (1, 2, 3))
+    assert len(results[7].tracks.visible()) == 3
+    assert len(results[2].tracks.visible()) == 0                # tentative tracks are never shown
+    assert 4 not in np.concatenate([r.tracks.visible().ids for r in results])
+
+
+def test_miss_coasts_then_resets_and_deletion_after_ft():
+    cfg = AssociationConfig(confirm_length=2, max_misses=3)
+    tracker = MultiTargetTracker(cfg, KALMAN)
+    frames = [three_targets(k) for k in range(12)]
+    for k in (4, 5):
+        frames[k] = frames[k][1:]                               # target 1 missed twice
+    for k in range(7, 12):
+        frames[k] = frames[k][1:]                               # then gone for good
+    results = run(tracker, frames)
+    assert state_of(results[4], 1) == COASTING and results[4].tracks.misses[0] == 1
+    assert results[5].tracks.misses[0] == 2
+    # coasting on prediction: the box kept moving right at ~20 px/s
+    assert results[5].tracks.boxes[0, 0] > results[3].tracks.boxes[0, 0] + 2.0
+    assert state_of(results[6], 1) == CONFIRMED and results[6].tracks.misses[0] == 0   # counter reset
+    assert state_of(results[9], 1) == COASTING                                       # 3 misses: kept
+    assert state_of(results[10], 1) is None                                          # 4 > f_t: deleted
+    assert {2, 3} <= set(results[11].tracks.ids.tolist())
+    assert tracker.next_id == 4                                                      # no new tracks
+
+
+def test_assignment_above_ct_counts_as_miss():
+    tracker = MultiTargetTracker(AssociationConfig(confirm_length=2), KALMAN)
+    frames = [three_targets(k) for k in range(4)]
+    # target 1's detection jumps far against its motion: the Hungarian still pairs it (one
+    # detection per target), but its cost exceeds c_t = 0.3 (rule 2)
+    frames.append([box(-100, 20)] + three_targets(4)[1:])
+    results = run(tracker, frames)
+    last = results[-1]
+    assert state_of(last, 1) == COASTING and last.tracks.misses[0] == 1
+    assert state_of(last, 4) == TENTATIVE                       # the far detection starts a new track
+    assert state_of(last, 2) == CONFIRMED and state_of(last, 3) == CONFIRMED
+
+
+def test_crossing_targets_keep_their_ids():
+    # Four targets in two crossing pairs (seed §4.1: crossing within frames 613-715 keeps the IDs).
+    tracker = MultiTargetTracker(AssociationConfig(confirm_length=3), KALMAN)
+    frames = []
+    for k in range(40):
+        frames.append([box(100 + 4 * k, 100 + 2 * k), box(260 - 4 * k, 100 + 2 * k),
+                       box(100 + 4 * k, 300 - 2 * k), box(260 - 4 * k, 300 - 2 * k)])
+    results = run(tracker, frames)
+    final = results[-1].tracks.visible()
+    assert sorted(final.ids.tolist()) == [1, 2, 3, 4]
+    order = np.argsort(final.ids)
+    centres = final.boxes[order, :2] + final.boxes[order, 2:] / 2
+    np.testing.assert_allclose(centres, [[256, 178], [104, 178], [256, 222], [104, 222]], atol=2.0)
+    np.testing.assert_allclose(final.velocities[order], [[40, 20], [-40, 20], [40, -20], [-40, -20]], atol=3.0)
+
+
+def test_ids_never_reused_after_reset_on_backward_stamp():
+    tracker = MultiTargetTracker(AssociationConfig(confirm_length=1, gate="mahalanobis"), KALMAN)
+    tracker.step(1.0, [box(10, 10)])
+    r = tracker.step(1.1, [box(11, 10)])
+    assert r.tracks.ids.tolist() == [1] and not r.reset
+    r = tracker.step(0.2, [box(11, 10)])                        # looped bag: stamps went backwards
+    assert r.reset and r.tracks.ids.tolist() == [2]
+    r = tracker.step(100.0, [box(11, 10)])                      # jump beyond max_frame_gap
+    assert r.reset and r.tracks.ids.tolist() == [3]
+    r = tracker.step(100.0, [box(12, 10)])                      # repeated stamp: default interval
+    assert not r.reset and r.tracks.ids.tolist() == [3]
+
+
+# -- bad input --------------------------------------------------------------------------------
+def test_nan_inf_and_negative_size_rejected_and_counted():
+    tracker = MultiTargetTracker(AssociationConfig(confirm_length=1), KALMAN)
+    boxes = np.array([box(10, 10), [np.nan, 0, 5, 5], [0, np.inf, 5, 5], [0, 0, -5, 5], [0, 0, 5, 0]])
+    r = tracker.step(0.0, boxes, scores=[0.9, 0.9, 0.9, 0.9, 0.9])
+    assert r.rejected == 4
+    assert len(r.tracks) == 1
+    r = tracker.step(0.1, [box(10, 10)], scores=[np.nan])
+    assert r.rejected == 1
+    with pytest.raises(AssociationError):
+        tracker.step(0.2, np.zeros((3, 5)))
+    with pytest.raises(AssociationError):
+        tracker.step(0.2, np.zeros((2, 4)), scores=[1.0])
+    with pytest.raises(AssociationError):
+        tracker.step(float("nan"), np.zeros((0, 4)))
+
+
+# -- beyond the seed --------------------------------------------------------------------------
+def test_lone_target_needs_absolute_gate():
+    # Seed normalisation: with one target and one detection c = θ/maxθ + r/maxr = 0 + 1 > c_t.
+    frames = [[box(50 + 2 * k, 50)] for k in range(6)]
+    seed = run(MultiTargetTracker(AssociationConfig(confirm_length=2), KALMAN), frames)
+    assert seed[1].tracks.ids.tolist() == [1, 2]                 # the pair of frames 0-1 is refused
+    gated = run(MultiTargetTracker(AssociationConfig(confirm_length=2, gate="mahalanobis"), KALMAN), frames)
+    assert gated[-1].tracks.ids.tolist() == [1] and state_of(gated[-1], 1) == CONFIRMED
+
+
+def test_far_clutter_does_not_rescale_with_mahalanobis_gate():
+    cfg = AssociationConfig(confirm_length=2, gate="mahalanobis")
+    tracker = MultiTargetTracker(cfg, KALMAN)
+    frames = [three_targets(k) for k in range(5)] + [three_targets(5) + [box(5000, 5000)]]
+    results = run(tracker, frames)
+    assert all(state_of(results[-1], i) == CONFIRMED for i in (1, 2, 3))
+    assert state_of(results[-1], 4) == TENTATIVE
+
+
+def test_second_pass_keeps_track_on_low_score_detection():
+    frames = [three_targets(k) for k in range(6)]
+    scores = [[0.9, 0.9, 0.9]] * 5 + [[0.2, 0.9, 0.9]]         # target 1 weakly detected in the last frame
+
+    def go(second_pass):
+        tracker = MultiTargetTracker(AssociationConfig(confirm_length=2, gate="mahalanobis",
+                                                       second_pass=second_pass, high_score=0.5), KALMAN)
+        return [tracker.step(k / FPS, np.array(b), scores=s) for k, (b, s) in enumerate(zip(frames, scores))][-1]
+
+    with_pass, without = go(True), go(False)
+    assert state_of(with_pass, 1) == CONFIRMED and with_pass.tracks.misses[0] == 0
+    assert with_pass.tracks.ids.max() == 3                       # low-score detections start no track
+    assert state_of(without, 1) == CONFIRMED                     # without: an ordinary detection
+
+
+def test_reacquire_lost_track_keeps_id():
+    frames = [three_targets(k, dx=0.0) for k in range(4)] + [three_targets(0, dx=0.0)[1:]] * 4 \
+        + [three_targets(0, dx=0.0)] * 2
+
+    def go(reacquire):
+        cfg = AssociationConfig(confirm_length=2, max_misses=2, gate="mahalanobis", reacquire_frames=reacquire)
+        return run(MultiTargetTracker(cfg, KALMAN), frames)
+
+    seed = go(0)
+    assert state_of(seed[8], 1) is None and state_of(seed[8], 4) == TENTATIVE   # a new ID
+    kept = go(10)
+    assert state_of(kept[7], 1) == LOST and len(kept[7].tracks.visible()) == 2
+    assert state_of(kept[8], 1) == CONFIRMED and kept[-1].tracks.ids.max() == 3
+
+
+def test_iou_weight_changes_cost_only_when_set():
+    tracker = MultiTargetTracker(AssociationConfig(confirm_length=1, iou_weight=1.0, gate="mahalanobis"), KALMAN)
+    results = run(tracker, [three_targets(k) for k in range(5)])
+    assert results[-1].tracks.ids.tolist() == [1, 2, 3]
+
+
+def test_trail_records_history():
+    cfg = AssociationConfig(confirm_length=1, history_length=3, tentative_max_misses=0, gate="mahalanobis")
+    tracker = MultiTargetTracker(cfg, KALMAN)
+    run(tracker, [[box(10 + k, 10)] for k in range(5)])
+    trail = tracker.trail(1)
+    assert len(trail) == 3                                      # max(history_length, l_t + misses + 1)
+    np.testing.assert_allclose(trail[:, 0], [3, 4, 5])
+    assert trail[-1, 0] == 5 and trail[-1, 5] == 1.0
+    assert len(tracker.trail(99)) == 0
