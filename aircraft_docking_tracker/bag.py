@@ -244,12 +244,12 @@ class _TopicState:
 class BagWriter:
     """Write a rosbag2-compatible MCAP file (``x.mcap``) or bag directory (any other path).
 
-    Thread-safe: several subscription callbacks may write at once. ``flush_every_ns`` closes the
-    open chunk when that much log time has passed, so a hard kill loses at most that much.
+    Thread-safe: several subscription callbacks may write at once. :meth:`flush` closes the open
+    chunk and pushes it to disk: a recorder calls it periodically, so a hard kill loses little.
     """
 
     def __init__(self, path: str | Path, *, compression: str = "zstd", chunk_size: int = 1 << 20,
-                 flush_every_ns: int | None = None, overwrite: bool = False):
+                 overwrite: bool = False):
         path = Path(path)
         if path.suffix == ".mcap":
             self.directory = None
@@ -271,8 +271,6 @@ class BagWriter:
         self._schemas: dict[str, int] = {}
         self._topics: dict[str, _TopicState] = {}
         self._lock = threading.Lock()
-        self._flush_every_ns = flush_every_ns
-        self._last_flush_ns: int | None = None
         self.start_ns: int | None = None
         self.end_ns: int | None = None
         self.bytes_written = 0
@@ -337,12 +335,6 @@ class BagWriter:
             self.bytes_written += len(data)
             self.start_ns = log_time_ns if self.start_ns is None else min(self.start_ns, log_time_ns)
             self.end_ns = log_time_ns if self.end_ns is None else max(self.end_ns, log_time_ns)
-            if self._flush_every_ns is not None:
-                if self._last_flush_ns is None:
-                    self._last_flush_ns = log_time_ns
-                elif log_time_ns - self._last_flush_ns >= self._flush_every_ns:
-                    self._writer.flush()
-                    self._last_flush_ns = log_time_ns
 
     def flush(self) -> None:
         """Close the open chunk and push it to disk (what a hard kill keeps)."""

@@ -1,0 +1,180 @@
+"""``mcap_record``: record live topics, undeserialised, into a rosbag2-compatible MCAP file.
+
+    mcap_record -a -o run1                 # every topic, bag directory run1/ (metadata.yaml + mcap)
+    mcap_record image detections -o x.mcap # two topics, one file
+
+Topics appear while it runs are picked up (discovery every ``--discovery-interval`` s). The
+subscription QoS adapts to the publishers, as ``ros2 bag record`` does: reliable only if every
+publisher is reliable, transient-local only if every one is. Log time is the receive time on the
+node's clock (``use_sim_time`` honoured), publish time the publisher's source timestamp. Ctrl-C or
+SIGTERM finish the file properly; after a hard kill, the file holds everything up to the last
+chunk flushed (every ``--flush-interval`` s) and ``mcap_record --recover IN OUT`` repairs it.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import re
+import sys
+import threading
+import time
+
+from .bag import BagError, BagWriter, get_message_class, qos_to_dict, recover
+
+
+class Recorder:
+    """Raw subscriptions on ``node`` for the selected topics, written to ``writer``."""
+
+    def __init__(self, node, writer: BagWriter, topics: list[str] | None = None,
+                 exclude: str | None = None, include_hidden: bool = False):
+        self.node = node
+        self.writer = writer
+        self.topics = {self._absolute(t) for t in topics} if topics else None
+        self.exclude = re.compile(exclude) if exclude else None
+        self.include_hidden = include_hidden
+        self.subscriptions: dict[str, object] = {}
+        self.unknown_types: set[str] = set()
+        self.errors = 0
+        self._lock = threading.Lock()
+
+    def _absolute(self, topic: str) -> str:
+        from rclpy.validate_full_topic_name import validate_full_topic_name  # noqa: PLC0415
+
+        name = self.node.resolve_topic_name(topic)
+        validate_full_topic_name(name)
+        return name
+
+    def wanted(self, topic: str) -> bool:
+        if self.topics is not None:
+            return topic in self.topics
+        if self.exclude is not None and self.exclude.search(topic):
+            return False
+        return self.include_hidden or not any(part.startswith("_") for part in topic.split("/"))
+
+    def discover(self) -> None:
+        """Subscribe to every wanted topic that has publishers and no subscription yet."""
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic in self.subscriptions or not self.wanted(topic) or not types:
+                continue
+            type_name = types[0]
+            try:
+                msg_class = get_message_class(type_name)
+            except BagError:
+                if type_name not in self.unknown_types:
+                    self.unknown_types.add(type_name)
+                    self.node.get_logger().warning(f"cannot record {topic}: type {type_name} is not installed")
+                continue
+            infos = self.node.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue
+            qos = self._adapted_qos(infos)
+            offered = [qos_to_dict(info.qos_profile) for info in infos]
+            self.writer.add_topic(topic, type_name, offered)
+            self.subscriptions[topic] = self.node.create_subscription(
+                msg_class, topic, self._callback(topic, type_name), qos, raw=True)
+            self.node.get_logger().info(f"recording {topic} [{type_name}]")
+
+    @staticmethod
+    def _adapted_qos(infos):
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: PLC0415
+
+        reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+        transient = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+        return QoSProfile(depth=100,
+                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
+
+    def _callback(self, topic: str, type_name: str):
+        clock = self.node.get_clock()
+
+        def on_message(data: bytes, info) -> None:
+            receive_ns = clock.now().nanoseconds
+            source_ns = info.get("source_timestamp") if isinstance(info, dict) else None
+            try:
+                self.writer.write_serialized(topic, type_name, data, receive_ns, source_ns or receive_ns)
+            except Exception as exc:  # a full disk must not kill the node: count and say so
+                with self._lock:
+                    self.errors += 1
+                self.node.get_logger().error(f"write failed on {topic}: {exc}", throttle_duration_sec=5.0)
+        return on_message
+
+
+def default_output_name() -> str:
+    return datetime.datetime.now().strftime("rosbag2_%Y_%m_%d-%H_%M_%S")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="mcap_record", description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("topics", nargs="*", help="topics to record (relative names resolve in the node's namespace)")
+    parser.add_argument("-a", "--all", action="store_true", help="record every topic (default when none is named)")
+    parser.add_argument("-o", "--output", default=None,
+                        help="output: NAME.mcap for one file, anything else for a rosbag2 directory "
+                             "(default rosbag2_<date>)")
+    parser.add_argument("-e", "--exclude", default=None, help="regular expression of topics not to record (with -a)")
+    parser.add_argument("--include-hidden-topics", action="store_true", help="also record topics with a part starting with _")
+    parser.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd")
+    parser.add_argument("--chunk-size", type=int, default=1 << 20, help="chunk size in bytes (default 1 MiB)")
+    parser.add_argument("--flush-interval", type=float, default=1.0,
+                        help="close a chunk at least this often (seconds): what a hard kill can lose")
+    parser.add_argument("--discovery-interval", type=float, default=0.5, help="seconds between topic discoveries")
+    parser.add_argument("--max-duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C)")
+    parser.add_argument("--recover", nargs=2, metavar=("IN", "OUT"),
+                        help="repair a recording that was killed: rewrite IN's readable messages into OUT and exit")
+    return parser
+
+
+def main(args: list[str] | None = None) -> int:
+    import rclpy  # noqa: PLC0415
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  # noqa: PLC0415
+    from rclpy.utilities import remove_ros_args  # noqa: PLC0415
+
+    argv = sys.argv if args is None else ["mcap_record", *args]
+    options = build_parser().parse_args(remove_ros_args(argv)[1:])
+    if options.recover:
+        try:
+            count = recover(*options.recover)
+        except BagError as exc:
+            print(f"mcap_record: {exc}", file=sys.stderr)
+            return 2
+        print(f"recovered {count} messages into {options.recover[1]}")
+        return 0
+
+    output = options.output or default_output_name()
+    try:
+        writer = BagWriter(output, compression=options.compression, chunk_size=options.chunk_size)
+    except BagError as exc:
+        print(f"mcap_record: {exc}", file=sys.stderr)
+        return 2
+    rclpy.init(args=argv)
+    node = rclpy.create_node("mcap_record")
+    recorder = Recorder(node, writer, options.topics or None, options.exclude, options.include_hidden_topics)
+    node.create_timer(options.discovery_interval, recorder.discover)
+    # close a chunk at least every flush interval: what a hard kill can lose
+    node.create_timer(max(options.flush_interval, 0.1), writer.flush)
+    recorder.discover()
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    started = time.monotonic()
+    print(f"mcap_record: writing {output} ({'all topics' if not options.topics else ', '.join(options.topics)}); Ctrl-C to stop")
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+            if options.max_duration and time.monotonic() - started >= options.max_duration:
+                break
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        writer.close()
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    print(f"mcap_record: wrote {writer.message_count} messages, {writer.bytes_written / 1e6:.2f} MB of payload, "
+          f"to {output}")
+    for topic, count in sorted(writer.topic_counts.items()):
+        print(f"  {topic}: {count}")
+    return 1 if recorder.errors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
