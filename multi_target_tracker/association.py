@@ -232,6 +232,13 @@ class MultiTargetTracker:
         self.last_stamp: float | None = None
         self._clear()
 
+    def configure(self, config: AssociationConfig | None = None, kalman: KalmanConfig | None = None) -> None:
+        """Apply new settings from the next frame on, keeping the tracks (runtime parameter change)."""
+        if config is not None:
+            self.config = validate(config)
+        if kalman is not None:
+            self.kalman_config = self.bank.config = validate(kalman)
+
     def _clear(self) -> None:
         self.bank = KalmanBank(self.kalman_config)
         self.ids = np.zeros(0, dtype=np.int64)

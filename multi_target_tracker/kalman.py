@@ -70,7 +70,11 @@ class KalmanBank:
         self.x = np.zeros((0, 4))        # states [x, Δx, y, Δy], centre [px] and velocity [px/s]
         self.P = np.zeros((0, 4, 4))     # state covariances
         self.size = np.zeros((0, 2))     # smoothed box width and height [px]
-        self.R = np.eye(2) * self.config.measurement_noise ** 2
+
+    @property
+    def R(self) -> np.ndarray:
+        """Measurement noise covariance r² I (eq. 5's v_k)."""
+        return np.eye(2) * self.config.measurement_noise ** 2
 
     def __len__(self) -> int:
         return len(self.x)

@@ -24,6 +24,7 @@ from multi_target_tracker.association import AssociationConfig, MultiTargetTrack
 from multi_target_tracker.kalman import KalmanConfig
 
 KALMAN_PREFIX = "kalman."
+NODE_NAME = "association"  # the ROS node name, and its section in config/association.yaml
 
 
 def track_sequence(detections: np.ndarray, fps: float, tracker: MultiTargetTracker, last_frame: int | None = None,
@@ -76,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
 def configs_from(args) -> tuple[AssociationConfig, KalmanConfig]:
     """Association and Kalman configs: YAML file, then the command-line options on top."""
     params = args.params or package_config_dir() / "association.yaml"
-    base = load_yaml_parameters(params, "association_node") if Path(params).is_file() else {}
+    base = load_yaml_parameters(params, NODE_NAME) if Path(params).is_file() else {}
     kalman_base = {k[len(KALMAN_PREFIX):]: v for k, v in base.items() if k.startswith(KALMAN_PREFIX)}
     assoc = config_from_arguments(AssociationConfig, args, base=base)
     kalman = config_from_arguments(KalmanConfig, args, prefix="kalman_", base=kalman_base)

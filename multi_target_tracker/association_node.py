@@ -1,0 +1,195 @@
+"""``association_node``: detections in, tracks out (seed 003 §3 via :mod:`multi_target_tracker.association`).
+
+Topics (relative names):
+
+* in ``detections`` (``sensor_msgs/PointCloud2``, ``DETECTION_DTYPE`` rows);
+* in ``image`` (``sensor_msgs/Image``), only with ``output.annotate_image``;
+* out ``tracks`` (``PointCloud2``, ``TRACK_DTYPE`` rows: confirmed tracks, coasting ones with
+  ``output.include_coasting``, tentative ones with ``output.include_tentative``; velocities in px/s);
+* out ``tracks/markers`` (``visualization_msgs/MarkerArray``: boxes, ids, short trails);
+* out ``tracks/image`` (``sensor_msgs/Image`` bgr8, the image with the tracks drawn), only with
+  ``output.annotate_image``.
+
+Every output carries the header of the detections message (the image's stamp and frame_id). The
+frame interval T of the filters comes from those stamps. Invalid detection rows (NaN, inf,
+size <= 0) are dropped, counted and reported in ``/diagnostics``; stamps going backwards (a looped
+bag) or jumping reset the tracks; new IDs keep counting up.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from aircraft_docking_tracker.bag import stamp_to_ns
+from aircraft_docking_tracker.config import param
+from aircraft_docking_tracker.markers import boxes_to_markers
+from aircraft_docking_tracker.node_base import PerceptionNode, run_node
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
+from aircraft_docking_tracker.processing import MessageProcessor
+from multi_target_tracker.association import AssociationConfig, MultiTargetTracker, Tracks
+from multi_target_tracker.kalman import KalmanConfig
+from multi_target_tracker.mot_track import KALMAN_PREFIX, NODE_NAME
+
+OUTPUT_PREFIX = "output."
+_IMAGE_BUFFER = 30
+
+
+@dataclass
+class AssociationOutputConfig:
+    """What the node publishes (set at start-up; topics do not change at runtime)."""
+
+    include_tentative: bool = param(False, "also publish tentative tracks (state 0)")
+    include_coasting: bool = param(True, "also publish confirmed tracks coasting on prediction (state 2)")
+    trail_length: int = param(20, "trail points per track in tracks/markers", low=0, high=1000)
+    annotate_image: bool = param(False, "subscribe to image and publish tracks/image with the tracks drawn")
+
+
+def tracks_to_table(tracks: Tracks) -> np.ndarray:
+    """The core's tracks as ``TRACK_DTYPE`` rows."""
+    table = np.zeros(len(tracks), dtype=TRACK_DTYPE)
+    table["id"] = tracks.ids
+    table["x"], table["y"], table["w"], table["h"] = tracks.boxes.T
+    table["vx"], table["vy"] = tracks.velocities.T
+    table["score"] = tracks.scores
+    table["class_id"] = tracks.class_ids
+    table["age"] = tracks.ages
+    table["misses"] = tracks.misses
+    table["state"] = tracks.states
+    return table
+
+
+def draw_tracks(bgr: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """The image with one box and id label per track (OpenCV drawing)."""
+    import cv2  # noqa: PLC0415
+
+    from aircraft_docking_tracker.markers import id_color  # noqa: PLC0415
+
+    out = np.ascontiguousarray(bgr).copy()
+    for row in table:
+        r, g, b = id_color(int(row["id"]))
+        color = (int(255 * b), int(255 * g), int(255 * r))
+        p0 = (int(round(row["x"])), int(round(row["y"])))
+        p1 = (int(round(row["x"] + row["w"])), int(round(row["y"] + row["h"])))
+        cv2.rectangle(out, p0, p1, color, 1 if row["state"] != 1 else 2)
+        cv2.putText(out, str(int(row["id"])), (p0[0], max(p0[1] - 3, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4, color, 1)
+    return out
+
+
+class AssociationProcessor(MessageProcessor):
+    """Message conversion around :class:`MultiTargetTracker` (live node and offline runner alike)."""
+
+    def __init__(self, config: AssociationConfig | None = None, kalman: KalmanConfig | None = None,
+                 output: AssociationOutputConfig | None = None, on_invalid=None):
+        self.tracker = MultiTargetTracker(config, kalman)
+        self.output = output or AssociationOutputConfig()
+        self.on_invalid = on_invalid
+        self.invalid_detections = 0
+        self.resets = 0
+        self.inputs = {"detections": "sensor_msgs/msg/PointCloud2"}
+        self.outputs = {"tracks": "sensor_msgs/msg/PointCloud2",
+                        "tracks/markers": "visualization_msgs/msg/MarkerArray"}
+        self.latest_only = frozenset()
+        if self.output.annotate_image:
+            self.inputs["image"] = "sensor_msgs/msg/Image"
+            self.outputs["tracks/image"] = "sensor_msgs/msg/Image"
+            self.latest_only = frozenset({"image"})
+        self._images: OrderedDict[int, object] = OrderedDict()   # stamp -> image waiting for its tracks
+        self._tables: OrderedDict[int, np.ndarray] = OrderedDict()  # stamp -> tracks waiting for the image
+        self._shown = 0
+
+    def process(self, topic, msg):
+        if topic == "image":
+            return self._image(msg)
+        stamp = stamp_to_ns(msg.header.stamp)
+        rows = cloud_to_table(msg, DETECTION_DTYPE)
+        boxes = np.stack([rows["x"], rows["y"], rows["w"], rows["h"]], axis=1).astype(np.float64)
+        result = self.tracker.step(stamp * 1e-9, boxes, rows["score"], rows["class_id"])
+        if result.rejected:
+            self.invalid_detections += result.rejected
+            if self.on_invalid:
+                self.on_invalid(f"detections: {result.rejected} invalid rows (NaN, inf or size <= 0) dropped")
+        self.resets += int(result.reset)
+        shown = result.tracks.visible(self.output.include_tentative, self.output.include_coasting)
+        self._shown = len(shown)
+        table = tracks_to_table(shown)
+        out = [("tracks", table_to_cloud(table, msg.header)),
+               ("tracks/markers", boxes_to_markers(table, msg.header, "tracks", label_field="id",
+                                                   trails=self._trails(shown.ids)))]
+        if self.output.annotate_image:
+            out += self._annotate(stamp, table)
+        return out
+
+    def _trails(self, ids) -> dict:
+        n = self.output.trail_length
+        if n == 0:
+            return {}
+        trails = {}
+        for track_id in ids:
+            t = self.tracker.trail(int(track_id))[-n:]
+            trails[int(track_id)] = [(x + w / 2, y + h / 2) for _, x, y, w, h, _ in t]
+        return trails
+
+    def _image(self, msg):
+        stamp = stamp_to_ns(msg.header.stamp)
+        if stamp in self._tables:
+            return self._publish_image(msg, self._tables.pop(stamp))
+        self._remember(self._images, stamp, msg)
+        return []
+
+    def _annotate(self, stamp, table):
+        if stamp in self._images:
+            return self._publish_image(self._images.pop(stamp), table)
+        self._remember(self._tables, stamp, table)
+        return []
+
+    @staticmethod
+    def _remember(buffer: OrderedDict, stamp: int, value) -> None:
+        buffer[stamp] = value
+        while len(buffer) > _IMAGE_BUFFER:
+            buffer.popitem(last=False)
+
+    @staticmethod
+    def _publish_image(image_msg, table):
+        from aircraft_docking_tracker.images import numpy_to_image, to_bgr8  # noqa: PLC0415
+
+        drawn = draw_tracks(to_bgr8(image_msg), table)
+        return [("tracks/image", numpy_to_image(drawn, "bgr8", image_msg.header))]
+
+    def reset(self) -> None:
+        self.tracker.reset()
+        self._images.clear()
+        self._tables.clear()
+
+    def status(self) -> dict:
+        states = self.tracker.states
+        return {"tracks published": self._shown, "tracks tentative": int((states == 0).sum()),
+                "tracks confirmed": int(((states == 1) | (states == 2)).sum()),
+                "invalid detection rows": self.invalid_detections, "track resets": self.resets,
+                "next id": self.tracker.next_id}
+
+
+class AssociationNode(PerceptionNode):
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        config = self.declare_config(AssociationConfig)
+        kalman = self.declare_config(KalmanConfig, prefix=KALMAN_PREFIX)
+        output = self.declare_config(AssociationOutputConfig, prefix=OUTPUT_PREFIX)
+        self.attach_processor(AssociationProcessor(config, kalman, output, on_invalid=self.reject))
+
+    def on_config_changed(self, cfg) -> None:
+        if isinstance(cfg, AssociationConfig):
+            self.processor.tracker.configure(config=cfg)
+        elif isinstance(cfg, KalmanConfig):
+            self.processor.tracker.configure(kalman=cfg)
+        else:   # output settings: trail length and track selection apply at once, topics at restart
+            self.processor.output = cfg
+
+
+def main(args=None):
+    run_node(AssociationNode, args)
+
+
+if __name__ == "__main__":
+    main()

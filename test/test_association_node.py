@@ -1,0 +1,116 @@
+"""association_node: in-process over detection messages, the processor's bad-input handling, the YAML file."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import Image, PointCloud2
+from std_msgs.msg import Header
+from visualization_msgs.msg import MarkerArray
+
+from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
+from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
+from aircraft_docking_tracker.processing import ProcessingStats, process_guarded
+from multi_target_tracker.association import AssociationConfig
+from multi_target_tracker.association_node import (AssociationNode, AssociationOutputConfig,
+                                                   AssociationProcessor)
+from multi_target_tracker.kalman import KalmanConfig
+
+from ros_helpers import ros_context, spin_until, wait_for_subscribers
+
+FAST = AssociationConfig(confirm_length=2, gate="mahalanobis")
+
+
+def header(k: int, fps: float = 10.0) -> Header:
+    return Header(stamp=ns_to_stamp(int(1e9 + k * 1e9 / fps)), frame_id="uav_cam")
+
+
+def detections_msg(k: int, rows=None) -> PointCloud2:
+    """Two targets moving right at 2 px/frame (20 px/s), optional extra rows."""
+    table = np.zeros(2, DETECTION_DTYPE)
+    table["x"] = [10 + 2 * k, 10 + 2 * k]
+    table["y"] = [20, 120]
+    table["w"], table["h"], table["score"] = 10, 8, 0.9
+    if rows is not None:
+        table = np.concatenate([table, rows])
+    return table_to_cloud(table, header(k))
+
+
+def test_yaml_lists_every_parameter_with_its_default():
+    params = load_yaml_parameters(package_config_dir() / "association.yaml", "association")
+    expected = {}
+    for prefix, cls in (("", AssociationConfig), ("kalman.", KalmanConfig), ("output.", AssociationOutputConfig)):
+        expected.update({prefix + f.name: getattr(cls(), f.name) for f in dataclasses.fields(cls)})
+    assert params == pytest.approx(expected)
+
+
+def test_processor_tracks_rejects_and_resets():
+    invalid = []
+    proc = AssociationProcessor(FAST, on_invalid=invalid.append)
+    stats = ProcessingStats()
+    for k in range(4):
+        out = dict(process_guarded(proc, "detections", detections_msg(k), stats))
+    tracks = cloud_to_table(out["tracks"], TRACK_DTYPE)
+    assert out["tracks"].header.frame_id == "uav_cam" and out["tracks"].header.stamp == header(3).stamp
+    assert sorted(tracks["id"].tolist()) == [1, 2] and (tracks["state"] == 1).all()
+    np.testing.assert_allclose(tracks["vx"], 20.0, atol=3.0)          # px/s from the 10 Hz stamps
+    assert isinstance(out["tracks/markers"], MarkerArray) and len(out["tracks/markers"].markers) > 2
+
+    bad = np.zeros(2, DETECTION_DTYPE)
+    bad["x"], bad["w"], bad["h"] = [np.nan, 5], [4, -3], [4, 4]
+    out = dict(process_guarded(proc, "detections", detections_msg(4, bad), stats))
+    assert proc.invalid_detections == 2 and len(invalid) == 1
+    assert len(cloud_to_table(out["tracks"], TRACK_DTYPE)) == 2
+
+    broken = detections_msg(5)
+    broken.data = broken.data[:5]                                      # truncated cloud: rejected
+    assert process_guarded(proc, "detections", broken, stats) == []
+    assert stats.rejected_total == 1
+
+    process_guarded(proc, "detections", detections_msg(0), stats)       # looped bag: time jump
+    assert stats.time_jumps == 1 and len(proc.tracker.ids) == 2 and proc.tracker.ids.min() > 2
+
+
+def test_annotated_image_pairs_image_and_tracks_by_stamp():
+    proc = AssociationProcessor(FAST, output=AssociationOutputConfig(annotate_image=True, include_tentative=True))
+    assert "image" in proc.inputs and "tracks/image" in proc.outputs
+    img = numpy_to_image(np.zeros((200, 100, 3), np.uint8), "bgr8", header(0))
+    assert proc.process("image", img) == []
+    out = dict(proc.process("detections", detections_msg(0)))
+    drawn = image_to_numpy(out["tracks/image"])
+    assert out["tracks/image"].header.stamp == header(0).stamp
+    assert drawn[20:29, 10].any() and not drawn[150:, 50:].any()       # box edges drawn, elsewhere black
+
+
+def test_node_in_process_over_detection_messages_and_bag(tmp_path):
+    with ros_context() as (ctx, executor):
+        node = AssociationNode(context=ctx, parameter_overrides=[
+            Parameter("confirm_length", value=2), Parameter("gate", value="mahalanobis")])
+        probe = rclpy.create_node("probe", context=ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        got = []
+        probe.create_subscription(PointCloud2, "tracks", got.append, 50)
+        pub = probe.create_publisher(PointCloud2, "detections", 50)
+        try:
+            assert wait_for_subscribers(executor, pub)
+            assert node.set_parameters([Parameter("cost_gate", value=-1.0)])[0].successful is False
+            bag = tmp_path / "in.mcap"
+            with BagWriter(bag) as writer:
+                for k in range(6):
+                    writer.write("detections", detections_msg(k), int(1e9 + k * 1e8))
+            for _, msg, _ in BagReader(bag).ros_messages(["detections"]):
+                pub.publish(msg)
+            assert spin_until(executor, lambda: len(got) == 6, timeout_s=15)
+            last = cloud_to_table(got[-1], TRACK_DTYPE)
+            assert sorted(last["id"].tolist()) == [1, 2]
+            assert got[-1].header.stamp == header(5).stamp and got[-1].header.frame_id == "uav_cam"
+            assert len(cloud_to_table(got[0], TRACK_DTYPE)) == 0            # tentative tracks hidden
+        finally:
+            node.destroy_node()
+            probe.destroy_node()
