@@ -92,16 +92,15 @@ class Player:
             time.sleep(0.02)
         return False
 
-    def _sleep_until(self, target: float, bag_ns_at: callable) -> None:
+    def _sleep_until(self, target: float, bag_ns_at) -> None:
         """Sleep to ``target`` (monotonic s), publishing /clock at its rate meanwhile."""
-        clock_period = 1.0 / self.options.clock_hz if self.clock_publisher else None
+        clock_period = 1.0 / self.options.clock_hz if self.clock_publisher else 0.05
         while not self._stop.is_set():
             remaining = target - time.monotonic()
             if remaining <= 0:
                 return
-            step = min(remaining, clock_period) if clock_period else remaining
-            time.sleep(min(step, 0.05) if remaining > 0.002 else 0)
-            if clock_period:
+            time.sleep(min(remaining, clock_period))
+            if self.clock_publisher:
                 self._publish_clock(bag_ns_at(time.monotonic()))
 
     def run(self) -> PlayReport:
