@@ -1,0 +1,463 @@
+"""``evaluate``: score an output bag (or results file) against its ground truth; table, JSON, plots.
+
+    evaluate out.mcap                         (ground truth recorded in the same bag)
+    evaluate ispf.mcap pf.mcap --gt scene.mcap --names ispf,pf --report out/report
+    evaluate results.txt --gt ../shared/data/sot/Car4/groundtruth_rect.txt
+    evaluate tracks.txt --gt ../shared/data/mot/TUD-Campus/gt.txt
+
+The metric family follows from the topics present (output / ground truth):
+
+* ``docking/polygon`` vs ``ground_truth/polygon`` -> single target (``sot_metrics``: OTB success
+  AUC, precision at 20 px, lost frames; polygon IoU; nose error when ``ground_truth/stand`` and
+  ``ground_truth/nose`` are there);
+* ``tracks`` vs ``ground_truth`` (rows with ``id``) -> multi target (``mot_metrics``: MOTA, MOTP,
+  IDF1, ID switches, fragmentations, MT/ML, seed 003 Fig. 4 continuity);
+* ``detections`` vs ``ground_truth`` -> detection (``detection_metrics``: seed 003 Table 1 rates,
+  PR curve, AP);
+* speed: for each output topic, its rate and the latency from the input ``image`` (or
+  ``detections``) with the same header stamp to the output, both from the recorder's log times.
+
+Outputs and ground truth are matched by header stamp. A ground-truth frame with no output counts
+as: single target - the last output held (``--missing hold``, default: what a viewer shows) or a
+lost frame (``--missing lost``); multi target and detection - no objects. The number of such
+frames is reported. Ground-truth rows marked hidden (``state`` 2 or visible fraction ``score`` below
+``hidden_below``, the synthetic UAV scenes) are ignored: neither a miss when not found, nor a false
+alarm when found (MOTChallenge's way with distractors).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import struct
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments, param, validate
+from aircraft_docking_tracker.evaluation import plots, report
+from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, DetectionMetricsConfig
+from aircraft_docking_tracker.evaluation.mot_metrics import MotEvaluator
+from aircraft_docking_tracker.evaluation.sot_metrics import SotMetricsConfig, box_iou, box_to_quad, score_sequence
+from aircraft_docking_tracker.evaluation.speed import latency_percentiles, stream_fps
+from aircraft_docking_tracker.object_table import TRACK_DTYPE
+
+IMAGE, DETECTIONS, TRACKS = "image", "detections", "tracks"
+DOCKING_POLYGON, GROUND_TRUTH = "docking/polygon", "ground_truth"
+GT_POLYGON, GT_NOSE, GT_STAND = "ground_truth/polygon", "ground_truth/nose", "ground_truth/stand"
+OUTPUT_TOPICS = (DOCKING_POLYGON, TRACKS, DETECTIONS)
+
+
+class EvaluationError(ValueError):
+    """Inputs that cannot be evaluated (no ground truth, nothing to compare); the message says why."""
+
+
+@dataclass
+class EvaluateConfig:
+    """How outputs are scored."""
+
+    iou_threshold: float = param(0.5, "IoU for a match (multi target, detection)", low=0.01, high=1.0)
+    precision_px: float = param(20.0, "centre-error threshold of the single-target precision [px]", low=0.0, high=1000.0)
+    lost_iou: float = param(0.0, "single target: a frame is lost when IoU <= this", low=0.0, high=1.0)
+    missing: str = param("hold", "single target: a frame with no output holds the last one, or counts as lost",
+                         choices=("hold", "lost"))
+    track_states: str = param("1,2", "track states scored (0 tentative, 1 confirmed, 2 coasting, 3 lost)")
+    hidden_below: float = param(0.3, "ground-truth rows whose visible fraction (score) is below this are ignored",
+                                low=0.0, high=1.0)
+
+    def validate(self) -> None:
+        try:
+            self.states()
+        except ValueError:
+            raise EvaluationError(f"track_states={self.track_states!r}: a comma-separated list of 0..3") from None
+
+    def states(self) -> list[int]:
+        return [int(s) for s in self.track_states.split(",") if s.strip()]
+
+
+# --- reading -------------------------------------------------------------------------------------
+
+def header_stamp_ns(cdr: bytes) -> int:
+    """Header stamp of a serialised message that starts with ``std_msgs/Header`` (little-endian CDR)."""
+    if len(cdr) < 12:
+        raise EvaluationError("message too short to hold a header")
+    sec, nanosec = struct.unpack_from("<iI", cdr, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+@dataclass
+class Stream:
+    """One topic of a bag: stamp -> decoded value, and stamp -> log time."""
+
+    values: dict
+    log_ns: dict
+
+
+def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(IMAGE,)) -> dict:
+    """``topic -> Stream`` for the ``topics`` present in the bag; values are decoded messages
+    (None for ``stamps_only`` topics, whose log times are all that is needed: images)."""
+    from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415 (ROS message classes)
+
+    reader = BagReader(path)
+    present = [t for t in topics if t in reader.topics]
+    streams = {t: Stream({}, {}) for t in present}
+    total = sum(reader.topics[t].count for t in present)
+    for item in tqdm(reader.messages(present), total=total, desc=f"reading {Path(path).name}",
+                     disable=not progress or total < 2000, unit="msg"):
+        stream = streams[item.topic]
+        if item.topic == GT_STAND:
+            stream.values[0] = item.deserialize().data
+            continue
+        stamp = header_stamp_ns(item.data)
+        stream.values[stamp] = None if item.topic in stamps_only else item.deserialize()
+        stream.log_ns[stamp] = item.log_time_ns
+    return streams
+
+
+def _quad(msg) -> np.ndarray:
+    from aircraft_docking_tracker.scenarios.messages import polygon_to_quad  # noqa: PLC0415
+
+    return polygon_to_quad(msg)
+
+
+def _table(msg) -> np.ndarray:
+    from aircraft_docking_tracker.object_table import cloud_to_table  # noqa: PLC0415
+
+    return cloud_to_table(msg)
+
+
+def _boxes(table: np.ndarray) -> np.ndarray:
+    if len(table) == 0:
+        return np.zeros((0, 4))
+    return np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(np.float64)
+
+
+# --- scoring, one family each ---------------------------------------------------------------------
+
+def nose_from_quad(quad: np.ndarray, nose_uv) -> np.ndarray:
+    """The point at template fractions ``(u, v)`` of an affine quadrilateral TL, TR, BR, BL."""
+    return quad[0] + nose_uv[0] * (quad[1] - quad[0]) + nose_uv[1] * (quad[3] - quad[0])
+
+
+def score_sot(gt: dict, out: dict, cfg: EvaluateConfig, stand: dict | None = None, gt_nose: dict | None = None) -> dict:
+    """``gt``, ``out``: stamp -> (4, 2) quad (NaN = absent / no output)."""
+    stamps = sorted(gt)
+    pred, missing, last = [], 0, np.full((4, 2), np.nan)
+    for s in stamps:
+        if s in out:
+            last = out[s]
+        else:
+            missing += 1
+            if cfg.missing == "lost":
+                pred.append(np.full((4, 2), np.nan))
+                continue
+        pred.append(last)
+    pred = np.array(pred).reshape(-1, 4, 2)
+    truth = np.array([gt[s] for s in stamps]).reshape(-1, 4, 2)
+    result = score_sequence(pred, truth, SotMetricsConfig(cfg.precision_px, cfg.lost_iou))
+    result["missing_outputs"] = missing
+    result["missing_policy"] = cfg.missing
+    if stand and gt_nose:
+        uv = np.array(stand["nose_template"]) / np.array(stand["template_size"], float)
+        err = [np.linalg.norm(nose_from_quad(p, uv) - gt_nose[s]) for p, s in zip(pred, stamps) if s in gt_nose]
+        err = np.array([e for e in err if np.isfinite(e)])
+        result["nose_error_median"] = float(np.median(err)) if err.size else float("nan")
+        result["nose_error_final"] = float(err[-1]) if err.size else float("nan")
+    return result
+
+
+def hidden_rows(table: np.ndarray, cfg: EvaluateConfig) -> np.ndarray:
+    """Ground-truth rows nobody is expected to see (synthetic UAV: hidden under trees or smoke)."""
+    if len(table) == 0:
+        return np.zeros(0, bool)
+    hidden = np.zeros(len(table), bool)
+    if "state" in table.dtype.names:
+        hidden |= table["state"] == 2
+    if "id" in table.dtype.names and "score" in table.dtype.names:
+        hidden |= table["score"] < cfg.hidden_below
+    return hidden
+
+
+def score_mot(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
+    """``gt``, ``out``: stamp -> TRACK_DTYPE-like tables. motmetrics via ``mot_metrics.MotEvaluator``."""
+    evaluator = MotEvaluator(cfg.iou_threshold)
+    states = cfg.states()
+    missing = 0
+    frame_of = {}
+    for frame, s in enumerate(sorted(gt), start=1):
+        frame_of[frame] = s
+        truth = gt[s]
+        hyp = out.get(s)
+        if hyp is None:
+            missing += 1
+            hyp = np.zeros(0, TRACK_DTYPE)
+        if "state" in hyp.dtype.names:
+            hyp = hyp[np.isin(hyp["state"], states)]
+        hidden = hidden_rows(truth, cfg)
+        if hidden.any() and len(hyp):      # drop hypotheses that sit on a hidden target (distractors)
+            iou_hidden = box_iou(_boxes(hyp)[:, None], _boxes(truth[hidden])[None]).max(axis=1)
+            visible_boxes = _boxes(truth[~hidden])
+            iou_visible = (box_iou(_boxes(hyp)[:, None], visible_boxes[None]).max(axis=1)
+                           if len(visible_boxes) else np.zeros(len(hyp)))
+            hyp = hyp[~((iou_hidden >= cfg.iou_threshold) & (iou_hidden > iou_visible))]
+        truth = truth[~hidden]
+        evaluator.update(frame, truth["id"], _boxes(truth), hyp["id"], _boxes(hyp))
+    scores = evaluator.result()
+    result = scores.as_dict(with_continuity=True)
+    result["missing_outputs"] = missing
+    result["timeline"] = timelines(evaluator)
+    return result
+
+
+def timelines(evaluator: MotEvaluator) -> dict:
+    """gt id -> [[frame, track id or None], ...] from the accumulator's events."""
+    events = evaluator.accumulator.mot_events
+    events = events[events["Type"].isin(["MATCH", "SWITCH", "MISS"]) & events["OId"].notna()]
+    out: dict = {}
+    for (frame, _), row in events.iterrows():
+        hyp = row["HId"]
+        out.setdefault(int(row["OId"]), []).append([int(frame), None if hyp != hyp else int(hyp)])
+    return {k: sorted(v) for k, v in sorted(out.items())}
+
+
+def score_detection(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
+    """``gt``, ``out``: stamp -> tables with x, y, w, h (and score for ``out``)."""
+    acc = DetectionAccumulator(DetectionMetricsConfig(cfg.iou_threshold))
+    missing = 0
+    for s in sorted(gt):
+        truth = gt[s]
+        dets = out.get(s)
+        if dets is None:
+            missing += 1
+            dets = np.zeros(0, [("x", "f4"), ("y", "f4"), ("w", "f4"), ("h", "f4"), ("score", "f4")])
+        acc.add_frame(_boxes(dets), dets["score"], _boxes(truth), hidden_rows(truth, cfg))
+    result = acc.summary()
+    result["missing_outputs"] = missing
+    return result
+
+
+def score_speed(streams: dict) -> dict:
+    """Per output topic: message count, rate from log times, latency from the input with the same stamp.
+
+    The input is ``detections`` for ``tracks`` (when recorded), else ``image``.
+    """
+    out = {}
+    for topic in OUTPUT_TOPICS:
+        if topic not in streams or not streams[topic].log_ns:
+            continue
+        logs = streams[topic].log_ns
+        entry = {"count": len(logs), "rate_hz": stream_fps(sorted(logs.values()))}
+        source = DETECTIONS if topic == TRACKS and DETECTIONS in streams else IMAGE
+        if source in streams:
+            inputs = streams[source].log_ns
+            lat = [(logs[s] - inputs[s]) * 1e-9 for s in logs if s in inputs]
+            if lat:
+                entry.update(latency_percentiles(lat))
+                entry["latency_from"] = source
+        out[topic] = entry
+    return out
+
+
+# --- whole bags and files ---------------------------------------------------------------------------
+
+ALL_TOPICS = (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON, GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND)
+
+
+def _decoded(streams: dict, topic: str, convert) -> dict:
+    return {s: convert(v) for s, v in streams[topic].values.items()} if topic in streams else {}
+
+
+def evaluate_streams(out_streams: dict, gt_streams: dict, config: EvaluateConfig | None = None) -> dict:
+    """Every metric family whose output and ground-truth topics are both present."""
+    cfg = validate(config or EvaluateConfig())
+    result: dict = {}
+    if DOCKING_POLYGON in out_streams and GT_POLYGON in gt_streams:
+        stand = json.loads(gt_streams[GT_STAND].values[0]) if GT_STAND in gt_streams else None
+        nose = {s: np.array([m.point.x, m.point.y]) for s, m in gt_streams[GT_NOSE].values.items()} \
+            if GT_NOSE in gt_streams else None
+        result["sot"] = score_sot(_decoded(gt_streams, GT_POLYGON, _quad), _decoded(out_streams, DOCKING_POLYGON, _quad),
+                                  cfg, stand, nose)
+    gt_tables = _decoded(gt_streams, GROUND_TRUTH, _table)
+    if TRACKS in out_streams and gt_tables:
+        if any("id" not in t.dtype.names for t in gt_tables.values()):
+            raise EvaluationError("ground_truth rows have no id: they are detection ground truth, not tracks")
+        result["mot"] = score_mot(gt_tables, _decoded(out_streams, TRACKS, _table), cfg)
+    if DETECTIONS in out_streams and gt_tables:
+        result["detection"] = score_detection(gt_tables, _decoded(out_streams, DETECTIONS, _table), cfg)
+    speed = score_speed(out_streams)
+    if speed:
+        result["speed"] = speed
+    return result
+
+
+def evaluate_bags(output_bag: str | Path, gt_bag: str | Path | None = None, config: EvaluateConfig | None = None,
+                  progress: bool = False) -> dict:
+    """Score ``output_bag`` against ``gt_bag`` (default: the ground truth inside ``output_bag``).
+
+    Returns ``{"sot"|"mot"|"detection": metrics, "speed": {...}}`` for the families present;
+    raises EvaluationError when no family can be scored.
+    """
+    out_streams = read_streams(output_bag, (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON), progress)
+    gt_path = gt_bag or output_bag
+    gt_streams = read_streams(gt_path, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND), progress)
+    result = evaluate_streams(out_streams, gt_streams, config)
+    if not {"sot", "mot", "detection"} & set(result):
+        raise EvaluationError(f"nothing to score: output topics {sorted(out_streams)}, ground truth topics "
+                              f"{sorted(gt_streams)} in {gt_path}")
+    result["inputs"] = {"output": str(output_bag), "ground_truth": str(gt_path)}
+    return result
+
+
+def _sot_gt_from_file(path: Path) -> dict:
+    from aircraft_docking_tracker.scenarios.datasets import read_sot_boxes  # noqa: PLC0415
+
+    boxes, _ = read_sot_boxes(path)
+    return dict(enumerate(box_to_quad(boxes)))
+
+
+def _mot_tables_from_file(path: Path) -> dict:
+    from multi_target_tracker import motchallenge  # noqa: PLC0415
+
+    rows = motchallenge.read_ground_truth(path) if path.name.startswith("gt") else motchallenge.read_mot(path)
+    tables = {}
+    for frame, r in motchallenge.frames(rows):
+        t = np.zeros(len(r), TRACK_DTYPE)
+        t["id"] = r["id"]
+        for name in ("x", "y", "w", "h", "score"):
+            t[name] = r[name]
+        t["score"] = np.where(r["visibility"] >= 0, r["visibility"], 1.0) if path.name.startswith("gt") else r["score"]
+        t["state"] = 1
+        tables[frame] = t
+    return tables
+
+
+def evaluate_files(results: str | Path, gt: str | Path, config: EvaluateConfig | None = None) -> dict:
+    """Score a results text file (OTB ``x,y,w,h`` lines, or MOTChallenge rows) against a gt file or bag.
+
+    Frames are matched by order: line k of an OTB file, frame k of a MOTChallenge file, the k-th
+    ground-truth message of a bag.
+    """
+    from aircraft_docking_tracker.scenarios.datasets import read_results_boxes  # noqa: PLC0415
+
+    cfg = validate(config or EvaluateConfig())
+    results, gt = Path(results), Path(gt)
+    first = next((ln for ln in results.read_text().splitlines() if ln.strip()), "")
+    columns = len(first.replace(",", " ").split())
+    if gt.suffix == ".mcap" or gt.is_dir():
+        streams = read_streams(gt, (GROUND_TRUTH, GT_POLYGON))
+        key = GT_POLYGON if columns == 4 else GROUND_TRUTH
+        if key not in streams:
+            raise EvaluationError(f"{gt}: no {key} topic for a {'single' if columns == 4 else 'multi'}-target results file")
+        convert = _quad if columns == 4 else _table
+        gt_frames = {k: convert(streams[key].values[s]) for k, s in enumerate(sorted(streams[key].values),
+                                                                             start=0 if columns == 4 else 1)}
+    else:
+        gt_frames = _sot_gt_from_file(gt) if columns == 4 else _mot_tables_from_file(gt)
+    if columns == 4:
+        pred = dict(enumerate(box_to_quad(read_results_boxes(results))))
+        return {"sot": score_sot(gt_frames, pred, cfg), "inputs": {"output": str(results), "ground_truth": str(gt)}}
+    if columns >= 6:
+        return {"mot": score_mot(gt_frames, _mot_tables_from_file(results), cfg),
+                "inputs": {"output": str(results), "ground_truth": str(gt)}}
+    raise EvaluationError(f"{results}: {columns} columns; OTB results have 4, MOTChallenge results at least 6")
+
+
+# --- report ---------------------------------------------------------------------------------------
+
+def write_plots(results: dict, folder: str | Path) -> list[Path]:
+    """The report's PNGs for the families present in ``results`` (run name -> evaluate dict)."""
+    folder = Path(folder)
+    written = []
+    sot = {name: r["sot"] for name, r in results.items() if "sot" in r}
+    if sot:
+        written.append(plots.success_precision_plot(sot, folder / "success_precision.png"))
+        written.append(plots.iou_over_time_plot(sot, folder / "iou_over_time.png"))
+    mot = {name: r["mot"] for name, r in results.items() if "mot" in r}
+    if mot:
+        written.append(plots.continuity_bars({n: m["continuity"] for n, m in mot.items()}, folder / "continuity.png"))
+        for name, m in mot.items():
+            tl = {int(k): [(f, h) for f, h in v] for k, v in m["timeline"].items()}
+            if tl:
+                written.append(plots.timeline_plot(tl, folder / f"timeline_{name}.png", f"Tracking timeline: {name}"))
+    det = {name: r["detection"] for name, r in results.items() if "detection" in r}
+    if det:
+        written.append(plots.pr_plot(det, folder / "pr.png"))
+    return written
+
+
+def write_strip(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, count: int = 6):
+    """Frames of the bag's ``image`` topic with ground truth (green) and outputs (magenta) drawn in."""
+    from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415
+    from aircraft_docking_tracker.images import to_bgr8  # noqa: PLC0415
+
+    source = next((p for p in (output_bag, gt_bag) if p is not None and IMAGE in BagReader(p).topics), None)
+    if source is None:
+        return None
+    reader = BagReader(source)
+    n = reader.topics[IMAGE].count
+    wanted = set(np.linspace(0, n - 1, min(count, n)).astype(int).tolist())
+    images = {}
+    for k, item in enumerate(reader.messages([IMAGE])):
+        if k in wanted:
+            images[header_stamp_ns(item.data)] = to_bgr8(item.deserialize())
+    outs = read_streams(output_bag, (DOCKING_POLYGON, TRACKS, DETECTIONS))
+    gts = read_streams(gt_bag or output_bag, (GT_POLYGON, GROUND_TRUTH))
+    tiles = []
+    for stamp, image in sorted(images.items()):
+        for streams, color in ((gts, plots.GT_COLOR), (outs, plots.RESULT_COLOR)):
+            quads = [_quad(streams[t].values[stamp]) for t in (GT_POLYGON, DOCKING_POLYGON)
+                     if t in streams and stamp in streams[t].values]
+            tables = [_table(streams[t].values[stamp]) for t in (GROUND_TRUTH, TRACKS)
+                      if t in streams and stamp in streams[t].values]
+            boxes = np.concatenate([_boxes(t) for t in tables]) if tables else ()
+            labels = [int(i) for t in tables for i in (t["id"] if "id" in t.dtype.names else [-1] * len(t))]
+            image = plots.draw_annotations(image, quads=quads, boxes=boxes, color=color,
+                                           labels=labels if tables else None)
+        tiles.append(image)
+    return plots.frame_strip(tiles, path) if tiles else None
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="evaluate", description=__doc__.split("\n")[0])
+    parser.add_argument("outputs", nargs="+", help="output bag(s) (.mcap or bag folder) or results file(s)")
+    parser.add_argument("--gt", help="ground truth: bag, OTB groundtruth_rect.txt or MOTChallenge gt.txt "
+                                     "(default: the ground truth inside each output bag)")
+    parser.add_argument("--names", help="comma-separated run names (default: file names)")
+    parser.add_argument("--report", help="folder for report.json and the PNG plots")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_config_arguments(parser, EvaluateConfig)
+    args = parser.parse_args(argv)
+    names = args.names.split(",") if args.names else [Path(p).stem for p in args.outputs]
+    if len(names) != len(args.outputs):
+        parser.error(f"{len(names)} names for {len(args.outputs)} outputs")
+    try:
+        cfg = config_from_arguments(EvaluateConfig, args)
+        results = {}
+        for name, output in zip(names, args.outputs):
+            if Path(output).suffix == ".txt":
+                if not args.gt:
+                    raise EvaluationError(f"{output}: a results file needs --gt")
+                results[name] = evaluate_files(output, args.gt, cfg)
+            else:
+                results[name] = evaluate_bags(output, args.gt, cfg, progress=not args.quiet)
+    except (ValueError, OSError) as exc:
+        print(f"evaluate: {exc}", file=sys.stderr)
+        return 2
+    print(report.format_report(results))
+    if args.report:
+        folder = Path(args.report)
+        report.write_json(folder / "report.json", results)
+        written = write_plots(results, folder)
+        first = args.outputs[0]
+        if Path(first).suffix != ".txt":
+            strip = write_strip(first, args.gt if args.gt and Path(args.gt).suffix == ".mcap" else None,
+                                folder / "strip.png")
+            written += [strip] if strip else []
+        print(f"\nreport: {folder / 'report.json'}" + "".join(f"\n        {p}" for p in written))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,115 @@
+"""Readers of the real datasets' files (no ROS): OTB / TinyTLP boxes, frame folders, YOLO labels.
+
+Conventions of the files, and what they become here (0-based pixels, top-left corner, ``x, y, w, h``):
+
+* OTB ``groundtruth_rect.txt``: one ``x,y,w,h`` per frame (commas, tabs or spaces), **1-based**
+  pixels (the OTB toolkit's MATLAB convention) -> 1 is subtracted from x and y;
+* TinyTLP ``groundtruth_rect.txt``: ``frame,x,y,w,h,lost`` per line -> x, y kept as they are
+  (TLP gives no base; its boxes are read as 0-based) and frames with ``lost = 1`` become NaN
+  (target absent: not scored);
+* YOLO ``labels/*.txt``: ``class cx cy w h`` normalised to the image -> pixel boxes;
+* MOTChallenge files are read by ``multi_target_tracker.motchallenge`` (the one reader of them).
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
+
+
+class DatasetError(ValueError):
+    """A dataset file or folder that cannot be read; the message names the file and the reason."""
+
+
+def _rows(path: Path) -> list[list[float]]:
+    """Numbers per non-empty line, split at commas, tabs or spaces."""
+    if not path.is_file():
+        raise DatasetError(f"{path}: no such file")
+    out = []
+    for number, line in enumerate(path.read_text().splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            out.append([float(v) for v in re.split(r"[,\s]+", line)])
+        except ValueError:
+            raise DatasetError(f"{path}:{number}: not a row of numbers: {line[:60]!r}") from None
+    return out
+
+
+def read_sot_boxes(path: str | Path) -> tuple[np.ndarray, str]:
+    """Boxes ``(N, 4)`` (0-based, NaN where the target is lost) and the format ("otb" or "tlp")."""
+    path = Path(path)
+    rows = _rows(path)
+    if not rows:
+        raise DatasetError(f"{path}: no boxes")
+    widths = {len(r) for r in rows}
+    if widths == {4}:
+        boxes = np.array(rows, np.float64)
+        boxes[:, :2] -= 1.0
+        return boxes, "otb"
+    if widths == {6}:
+        table = np.array(rows, np.float64)
+        boxes = table[:, 1:5].copy()
+        boxes[table[:, 5] != 0] = np.nan
+        return boxes, "tlp"
+    raise DatasetError(f"{path}: rows of {sorted(widths)} numbers; OTB has 4 (x,y,w,h), TLP 6 (frame,x,y,w,h,lost)")
+
+
+def read_results_boxes(path: str | Path) -> np.ndarray:
+    """A tracker's results file in the OTB layout (``x,y,w,h`` per frame, 0-based as we write them)."""
+    rows = _rows(Path(path))
+    if not rows or {len(r) for r in rows} != {4}:
+        raise DatasetError(f"{path}: an OTB-style results file has 4 numbers per line")
+    return np.array(rows, np.float64)
+
+
+def list_frames(folder: str | Path) -> list[Path]:
+    """The image files of a frame folder (its ``img/`` or ``images/`` subfolder if present), sorted."""
+    folder = Path(folder)
+    for sub in ("img", "images", "img1"):
+        if (folder / sub).is_dir():
+            folder = folder / sub
+            break
+    if not folder.is_dir():
+        raise DatasetError(f"{folder}: no such folder")
+    frames = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not frames:
+        raise DatasetError(f"{folder}: no image files ({', '.join(IMAGE_SUFFIXES)})")
+    return frames
+
+
+def read_yolo_labels(path: str | Path, width: int, height: int) -> np.ndarray:
+    """YOLO ``class cx cy w h`` (normalised) -> ``DETECTION_DTYPE`` rows in pixels (score 1).
+
+    A missing file means no objects (YOLO's convention for background tiles).
+    """
+    path = Path(path)
+    if not path.exists():
+        return np.zeros(0, DETECTION_DTYPE)
+    rows = _rows(path)
+    out = np.zeros(len(rows), DETECTION_DTYPE)
+    for k, r in enumerate(rows):
+        if len(r) != 5:
+            raise DatasetError(f"{path}: row {k + 1} has {len(r)} numbers, YOLO labels have 5")
+        cls, cx, cy, w, h = r
+        out[k] = ((cx - w / 2) * width, (cy - h / 2) * height, w * width, h * height, 1.0, int(cls))
+    return out
+
+
+def dataset_kind(folder: str | Path) -> str:
+    """"sot", "mot" or "detect", from what the folder holds."""
+    folder = Path(folder)
+    if (folder / "det.txt").is_file() or (folder / "gt.txt").is_file() or (folder / "det" / "det.txt").is_file():
+        return "mot"
+    if (folder / "labels").is_dir():
+        return "detect"
+    if (folder / "groundtruth_rect.txt").is_file():
+        return "sot"
+    raise DatasetError(f"{folder}: not a sot (groundtruth_rect.txt), mot (det.txt / gt.txt) or detect "
+                       "(images/ + labels/) dataset folder")

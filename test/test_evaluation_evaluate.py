@@ -1,0 +1,148 @@
+"""`evaluate` on hand-made bags and files: the same numbers as motmetrics and as hand computation."""
+from __future__ import annotations
+
+import json
+
+import motmetrics
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker.bag import BagWriter
+from aircraft_docking_tracker.evaluation import evaluate as ev
+from aircraft_docking_tracker.evaluation.sot_metrics import box_iou, box_to_quad
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE
+from aircraft_docking_tracker.scenarios import messages as m
+from aircraft_docking_tracker.scenarios.render import frame_stamp_ns
+
+A, B = [10, 10, 20, 20], [100, 10, 20, 20]
+FAR = [300, 300, 20, 20]
+# frame -> ground truth {id: box}; hypotheses {id: box}
+GT = [{1: A, 2: B}] * 4
+HYP = [{1: A, 2: B}, {1: A, 2: B}, {2: A, 1: B}, {2: A, 7: FAR}]   # swap at frame 3, miss + FP at 4
+
+
+def _table(rows: dict, dtype=TRACK_DTYPE, state=1):
+    t = np.zeros(len(rows), dtype)
+    for k, (i, (x, y, w, h)) in enumerate(rows.items()):
+        t[k]["x"], t[k]["y"], t[k]["w"], t[k]["h"] = x, y, w, h
+        t[k]["score"] = 1.0
+        if "id" in dtype.names:
+            t[k]["id"], t[k]["state"] = i, state
+    return t
+
+
+def _write(path, topic_frames: dict):
+    with BagWriter(path) as bag:
+        for topic, frames in topic_frames.items():
+            for k, table in enumerate(frames):
+                if table is None:
+                    continue
+                stamp = frame_stamp_ns(k, 10.0)
+                hdr = m.header(stamp)
+                msg = m.quad_to_polygon(table, hdr) if topic.endswith("polygon") else m.cloud_msg(table, hdr)
+                bag.write(topic, msg, stamp + (5_000_000 if topic in (m.TRACKS, m.DOCKING_POLYGON) else 0))
+    return path
+
+
+def _motmetrics_reference():
+    acc = motmetrics.MOTAccumulator(auto_id=False)
+    for frame, (g, h) in enumerate(zip(GT, HYP), start=1):
+        gb, hb = np.array(list(g.values()), float), np.array(list(h.values()), float)
+        dist = 1.0 - box_iou(gb[:, None], hb[None])
+        dist[dist > 0.5] = np.nan
+        acc.update(list(g), list(h), dist, frameid=frame)
+    return motmetrics.metrics.create().compute(acc, metrics=["mota", "idf1", "num_switches"], name="x").loc["x"]
+
+
+def test_mot_same_numbers_as_motmetrics_and_by_hand(tmp_path):
+    bag = _write(tmp_path / "mot.mcap", {m.GROUND_TRUTH: [_table(g) for g in GT], m.TRACKS: [_table(h) for h in HYP]})
+    r = ev.evaluate_bags(bag)["mot"]
+    ref = _motmetrics_reference()
+    assert r["mota"] == pytest.approx(ref["mota"]) and r["idf1"] == pytest.approx(ref["idf1"])
+    # by hand: 8 GT boxes, 1 miss, 1 false positive, 2 switches -> MOTA 1 - 4/8;
+    # IDF1: best id pairing (1-1, 2-2) shares 4 boxes of 8 GT + 8 hypotheses -> 2*4/16
+    assert r["mota"] == pytest.approx(0.5) and r["idf1"] == pytest.approx(0.5)
+    assert (r["num_switches"], r["num_misses"], r["num_false_positives"]) == (2, 1, 1)
+    cont = {c["gt_id"]: c for c in r["continuity"]}
+    assert cont[1]["longest_continuous"] == 2 and cont[2]["frames_tracked"] == 3
+    assert r["timeline"][2] == [[1, 2], [2, 2], [3, 1], [4, None]]
+
+
+def test_mot_hidden_ground_truth_is_ignored(tmp_path):
+    gt = [_table({1: A}), _table({1: A})]
+    gt[1]["state"], gt[1]["score"] = 2, 0.0                          # hidden in frame 2
+    hyp = [_table({5: A}), _table({5: A})]                           # the tracker coasts on it: no FP
+    r = ev.evaluate_bags(_write(tmp_path / "h.mcap", {m.GROUND_TRUTH: gt, m.TRACKS: hyp}))["mot"]
+    assert r["num_false_positives"] == 0 and r["num_misses"] == 0 and r["mota"] == pytest.approx(1.0)
+
+
+def test_sot_from_bags_shift_and_missing_output(tmp_path):
+    gt = [box_to_quad([0, 0, 10, 10])[0]] * 4
+    out = [box_to_quad([5, 0, 10, 10])[0], gt[0], None, box_to_quad([50, 50, 10, 10])[0]]
+    bag = _write(tmp_path / "s.mcap", {m.GT_POLYGON: gt, m.DOCKING_POLYGON: out})
+    held = ev.evaluate_bags(bag)["sot"]
+    np.testing.assert_allclose(held["iou"], [1 / 3, 1, 1, 0])        # frame 3 holds frame 2's output
+    assert held["missing_outputs"] == 1 and held["lost_frames"] == 1
+    lost = ev.evaluate_bags(bag, config=ev.EvaluateConfig(missing="lost"))["sot"]
+    np.testing.assert_allclose(lost["iou"], [1 / 3, 1, 0, 0])
+    assert lost["lost_frames"] == 2 and lost["longest_loss"] == 2
+    assert lost["precision"] == pytest.approx(0.5)
+
+
+def test_detection_from_bag_and_speed(tmp_path):
+    gt = [_table({0: [0, 0, 10, 10], 1: [20, 0, 10, 10]}, DETECTION_DTYPE)]
+    dets = np.zeros(3, DETECTION_DTYPE)
+    for k, (box, s) in enumerate([([0, 0, 10, 10], 0.9), ([1, 0, 10, 10], 0.8), ([25, 0, 10, 10], 0.7)]):
+        dets[k]["x"], dets[k]["y"], dets[k]["w"], dets[k]["h"] = box
+        dets[k]["score"] = s
+    r = ev.evaluate_bags(_write(tmp_path / "d.mcap", {m.GROUND_TRUTH: gt, m.DETECTIONS: [dets]}))
+    assert r["detection"]["detection_rate"] == pytest.approx(0.5)
+    assert r["detection"]["false_alarm_rate"] == pytest.approx(2 / 3)
+
+
+def test_latency_from_log_times(tmp_path):
+    gt = [_table({1: A})] * 3
+    bag = _write(tmp_path / "l.mcap", {m.GROUND_TRUTH: gt, m.DETECTIONS: [_table({0: A}, DETECTION_DTYPE)] * 3,
+                                      m.TRACKS: [_table({1: A})] * 3})
+    speed = ev.evaluate_bags(bag)["speed"]
+    assert speed["tracks"]["p50_ms"] == pytest.approx(5.0) and speed["tracks"]["latency_from"] == "detections"
+    assert speed["tracks"]["rate_hz"] == pytest.approx(10.0)
+
+
+def test_nothing_to_score_is_a_clear_error(tmp_path):
+    bag = _write(tmp_path / "n.mcap", {m.GROUND_TRUTH: [_table({1: A})]})
+    with pytest.raises(ev.EvaluationError, match="nothing to score"):
+        ev.evaluate_bags(bag)
+
+
+def test_results_files_otb_and_mot(tmp_path):
+    gt = tmp_path / "groundtruth_rect.txt"
+    gt.write_text("11,11,10,10\n11,11,10,10\n")                      # OTB: 1-based
+    res = tmp_path / "res.txt"
+    res.write_text("10,10,10,10\n15,10,10,10\n")                     # ours: 0-based
+    r = ev.evaluate_files(res, gt)["sot"]
+    np.testing.assert_allclose(r["iou"], [1.0, 1 / 3])
+    mot_gt = tmp_path / "gt.txt"
+    mot_res = tmp_path / "tracks.txt"
+    mot_gt.write_text("".join(f"{f},{i},{b[0]},{b[1]},{b[2]},{b[3]},1,-1,-1,-1\n"
+                              for f, g in enumerate(GT, 1) for i, b in g.items()))
+    mot_res.write_text("".join(f"{f},{i},{b[0]},{b[1]},{b[2]},{b[3]},1,-1,-1,-1\n"
+                               for f, h in enumerate(HYP, 1) for i, b in h.items()))
+    r = ev.evaluate_files(mot_res, mot_gt)["mot"]
+    assert r["mota"] == pytest.approx(0.5) and r["idf1"] == pytest.approx(0.5)
+
+
+def test_cli_writes_table_json_and_plots(tmp_path, capsys):
+    bag = _write(tmp_path / "mot.mcap", {m.GROUND_TRUTH: [_table(g) for g in GT], m.TRACKS: [_table(h) for h in HYP]})
+    sot = _write(tmp_path / "sot.mcap", {m.GT_POLYGON: [box_to_quad(A)[0]] * 3,
+                                        m.DOCKING_POLYGON: [box_to_quad(B)[0], box_to_quad(A)[0], box_to_quad(A)[0]]})
+    rep = tmp_path / "report"
+    assert ev.main([str(bag), str(sot), "--report", str(rep), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "MOTA" in text and "AUC" in text
+    data = json.loads((rep / "report.json").read_text())
+    assert data["mot"]["mot"]["mota"] == pytest.approx(0.5)
+    assert data["sot"]["sot"]["lost_frames"] == 1
+    for name in ("success_precision.png", "continuity.png", "timeline_mot.png"):
+        assert (rep / name).stat().st_size > 1000
+    assert ev.main([str(tmp_path / "missing.mcap")]) == 2
