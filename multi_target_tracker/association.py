@@ -48,10 +48,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 
 from aircraft_docking_tracker.config import param, validate
 from multi_target_tracker.kalman import KalmanBank, KalmanConfig
-from multi_target_tracker.motchallenge import iou_matrix
+from multi_target_tracker.motchallenge import box_iou
 
 TENTATIVE, CONFIRMED, COASTING, LOST = 0, 1, 2, 3
 #: Cost of a pair that a gate excludes; larger than any real cost so the Hungarian avoids it.
@@ -139,41 +140,74 @@ class FrameResult:
 # --------------------------------------------------------------------------------------------
 # Eqs. 8-12: the cost matrix and its padding
 # --------------------------------------------------------------------------------------------
-def angle_matrix(positions: np.ndarray, velocities: np.ndarray, points: np.ndarray,
-                 still_speed: float) -> np.ndarray:
-    """θ_ij of eq. 8: angle [rad] between target i's velocity and the vector from target i to point j.
+# The cost is computed for a list of (target i, detection j) pairs: every pair for the seed, the
+# pairs inside the Mahalanobis gate otherwise, so that a frame of a thousand targets stays sparse.
+def all_pairs(m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every (i, j) of an m x n matrix, row by row."""
+    i, j = np.divmod(np.arange(m * n), n)
+    return i, j
+
+
+def angles(origins: np.ndarray, velocities: np.ndarray, points: np.ndarray, still_speed: float) -> np.ndarray:
+    """θ_ij of eq. 8 per pair: angle [rad] between the target's velocity and the vector from the
+    target (``origins``) to the detection (``points``).
 
     θ = 0 for a target slower than ``still_speed`` (no direction yet) and for a point on the target.
     """
-    u = points[None, :, :] - positions[:, None, :]                     # (m, n, 2)
-    dot = np.einsum("mnk,mk->mn", u, velocities)
-    norms = np.linalg.norm(u, axis=2) * np.linalg.norm(velocities, axis=1)[:, None]
+    u = points - origins
+    speed = np.hypot(velocities[:, 0], velocities[:, 1])
+    norms = np.hypot(u[:, 0], u[:, 1]) * speed
+    dot = u[:, 0] * velocities[:, 0] + u[:, 1] * velocities[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
-        cos = np.where(norms > 0, dot / np.where(norms > 0, norms, 1.0), 1.0)
-    theta = np.arccos(np.clip(cos, -1.0, 1.0))
-    theta[np.linalg.norm(velocities, axis=1) < still_speed, :] = 0.0
+        cos = np.where(norms > 0, dot / norms, 1.0)
+    theta = np.arccos(np.clip(cos, -1.0, 1.0, out=cos))
+    theta[speed < still_speed] = 0.0
     return theta
 
 
-def normalise_by_max(values: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-    """Eqs. 8-9: divide by the maximum over the matrix (over ``mask`` only when given); 0 if it is 0."""
-    pool = values if mask is None else values[mask]
-    top = float(pool.max()) if pool.size else 0.0
+def distances(predicted: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """r_ij of eq. 9 per pair: distance from the target's predicted position to the detection."""
+    return np.hypot(points[:, 0] - predicted[:, 0], points[:, 1] - predicted[:, 1])
+
+
+def normalise_by_max(values: np.ndarray) -> np.ndarray:
+    """Eqs. 8-9: divide by the maximum over the matrix (the pairs given); 0 where the maximum is 0."""
+    top = float(values.max()) if values.size else 0.0
     return values / top if top > 0 else np.zeros_like(values)
 
 
-def seed_cost(positions, predicted, velocities, points, still_speed, mask=None) -> np.ndarray:
-    """Eq. 10: ``c_ij = θ_ij / max θ + r_ij / max r`` (maxima over ``mask`` when given)."""
-    theta = angle_matrix(positions, velocities, points, still_speed)
-    r = np.linalg.norm(points[None, :, :] - predicted[:, None, :], axis=2)
-    return normalise_by_max(theta, mask) + normalise_by_max(r, mask)
+def seed_cost(origins, predicted, velocities, points, still_speed) -> np.ndarray:
+    """Eq. 10 per pair: ``c_ij = θ_ij / max θ + r_ij / max r``, maxima over the pairs given."""
+    theta = angles(origins, velocities, points, still_speed)
+    r = distances(predicted, points)
+    return normalise_by_max(theta) + normalise_by_max(r)
 
 
-def mahalanobis_squared(predicted: np.ndarray, S: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """d²_ij = (z_j − Hx̂_i)ᵀ S_i⁻¹ (z_j − Hx̂_i) for every target i and detection j."""
-    diff = points[None, :, :] - predicted[:, None, :]                  # (m, n, 2)
-    S_inv = np.linalg.inv(S)                                           # (m, 2, 2)
-    return np.einsum("mnk,mkl,mnl->mn", diff, S_inv, diff)
+def mahalanobis_squared(predicted: np.ndarray, S_inv: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """d² = (z − Hx̂)ᵀ S⁻¹ (z − Hx̂) per pair, with ``S_inv`` the pair's inverse innovation covariance."""
+    dx, dy = points[:, 0] - predicted[:, 0], points[:, 1] - predicted[:, 1]
+    return S_inv[:, 0, 0] * dx * dx + 2.0 * S_inv[:, 0, 1] * dx * dy + S_inv[:, 1, 1] * dy * dy
+
+
+def gated_pairs(predicted: np.ndarray, S: np.ndarray, points: np.ndarray, gate: float,
+                brute_force_below: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    """The (i, j) pairs with d²_ij <= ``gate``.
+
+    Candidates come from every pair for small matrices, else from a KD-tree around each predicted
+    position with the gate's largest radius ``sqrt(gate · λ_max(S_i))``; the exact test follows.
+    """
+    m, n = len(predicted), len(points)
+    if m * n <= brute_force_below:
+        i, j = all_pairs(m, n)
+    else:
+        half_trace = (S[:, 0, 0] + S[:, 1, 1]) / 2.0
+        lam_max = half_trace + np.sqrt(((S[:, 0, 0] - S[:, 1, 1]) / 2.0) ** 2 + S[:, 0, 1] ** 2)
+        near = cKDTree(points).query_ball_point(predicted, r=np.sqrt(gate * lam_max) + 1e-9)
+        i = np.repeat(np.arange(m), [len(c) for c in near])
+        j = np.fromiter((k for c in near for k in c), dtype=np.intp, count=len(i))
+    d2 = mahalanobis_squared(predicted[i], np.linalg.inv(S)[i], points[j])
+    keep = d2 <= gate
+    return i[keep], j[keep]
 
 
 def pad_square(cost: np.ndarray) -> np.ndarray:
@@ -202,6 +236,13 @@ def valid_detections(boxes: np.ndarray, scores: np.ndarray) -> np.ndarray:
     """Mask of usable detections: finite numbers and positive width and height."""
     finite = np.isfinite(boxes).all(axis=1) & np.isfinite(scores)
     return finite & (boxes[:, 2] > 0) & (boxes[:, 3] > 0)
+
+
+def _without(indices: np.ndarray, remove: np.ndarray, size: int) -> np.ndarray:
+    """``indices`` (all below ``size``) less those in ``remove``, order kept."""
+    keep = np.ones(size, dtype=bool)
+    keep[remove] = False
+    return indices[keep[indices]]
 
 
 def _as_inputs(boxes, scores, class_ids):
@@ -285,18 +326,18 @@ class MultiTargetTracker:
         matched_t, matched_d = [active[t1]], [first[d1]]
         # Second association (ByteTrack): targets left over against the low-score detections.
         if len(second):
-            left = np.setdiff1d(active, matched_t[0])
+            left = _without(active, matched_t[0], len(self.bank))
             left = left[self.states[left] != TENTATIVE]
             t2, d2 = self._associate(left, second, previous, centres, boxes)
             matched_t.append(left[t2])
             matched_d.append(second[d2])
         # Unmatched first-pass detections may re-confirm lost targets, else start tentative tracks.
-        unmatched = np.setdiff1d(first, np.concatenate(matched_d))
+        unmatched = _without(first, np.concatenate(matched_d), len(boxes))
         if cfg.reacquire_frames > 0 and len(unmatched):
             t3, d3 = self._reacquire(unmatched, centres)
             matched_t.append(t3)
             matched_d.append(d3)
-            unmatched = np.setdiff1d(unmatched, d3)
+            unmatched = _without(unmatched, d3, len(boxes))
         rows = np.concatenate(matched_t).astype(np.intp)
         dets = np.concatenate(matched_d).astype(np.intp)
 
@@ -307,7 +348,7 @@ class MultiTargetTracker:
         self.scores[rows] = scores[dets]
         self.class_ids[rows] = class_ids[dets]
         # Rule 1 (and rule 2's rejected assignments): update with the prediction, count the miss.
-        missed = np.setdiff1d(np.arange(len(self.bank)), rows)
+        missed = _without(np.arange(len(self.bank)), rows, len(self.bank))
         self.bank.coast(missed)
         self.misses[missed] += 1
         confirmed_now = self._update_states(rows, missed)
@@ -345,18 +386,19 @@ class MultiTargetTracker:
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
         points = centres[detections]
         predicted = self.bank.positions[targets]
-        origin = previous[targets]                     # every target existed before this frame's births
-        allowed = None
         if cfg.gate == "mahalanobis":
-            d2 = mahalanobis_squared(predicted, self.bank.innovation_covariance()[targets], points)
-            allowed = d2 <= cfg.mahalanobis_gate
-        cost = seed_cost(origin, predicted, self.bank.velocities[targets], points, cfg.still_speed, allowed)
+            i, j = gated_pairs(predicted, self.bank.innovation_covariance()[targets], points, cfg.mahalanobis_gate)
+        else:
+            i, j = all_pairs(len(targets), len(detections))
+        # θ from the last estimate (every target existed before this frame's births), r from the prediction
+        pair_cost = seed_cost(previous[targets][i], predicted[i], self.bank.velocities[targets][i], points[j],
+                              cfg.still_speed)
         if cfg.iou_weight > 0:
-            cost += cfg.iou_weight * (1.0 - iou_matrix(self.bank.boxes()[targets], boxes[detections]))
-        if allowed is not None:
-            cost[~allowed] = EXCLUDED
+            pair_cost += cfg.iou_weight * (1.0 - box_iou(self.bank.boxes()[targets][i], boxes[detections][j]))
+        cost = np.full((len(targets), len(detections)), EXCLUDED)
+        cost[i, j] = pair_cost
         t, d = hungarian(cost)
-        accept = allowed[t, d] if allowed is not None else cost[t, d] <= cfg.cost_gate
+        accept = cost[t, d] <= cfg.cost_gate if cfg.gate == "cost" else cost[t, d] < EXCLUDED
         return t[accept], d[accept]
 
     def _reacquire(self, detections: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -374,19 +416,15 @@ class MultiTargetTracker:
     def _update_states(self, rows: np.ndarray, missed: np.ndarray) -> list:
         """Rule 4 (tentative → confirmed at l_t hits), coasting on misses, lost after f_t."""
         cfg = self.config
-        confirmed_now = []
-        for i in rows:
-            if self.states[i] == TENTATIVE:
-                if self.hits[i] >= cfg.confirm_length:
-                    self.states[i] = CONFIRMED
-                    confirmed_now.append(int(self.ids[i]))
-            else:
-                self.states[i] = CONFIRMED
-        coasting = missed[(self.states[missed] == CONFIRMED)]
+        tentative = rows[self.states[rows] == TENTATIVE]
+        promoted = tentative[self.hits[tentative] >= cfg.confirm_length]
+        self.states[rows[self.states[rows] != TENTATIVE]] = CONFIRMED   # coasting / lost ones re-confirmed
+        self.states[promoted] = CONFIRMED
+        coasting = missed[self.states[missed] == CONFIRMED]
         self.states[coasting] = COASTING
         gone = missed[(self.states[missed] == COASTING) & (self.misses[missed] > cfg.max_misses)]
         self.states[gone] = LOST
-        return confirmed_now
+        return self.ids[promoted].tolist()
 
     def _record(self, rows: np.ndarray, missed: np.ndarray) -> None:
         boxes = self.bank.boxes()

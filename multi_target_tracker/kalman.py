@@ -129,7 +129,7 @@ class KalmanBank:
 
     def coast(self, rows: np.ndarray) -> None:
         """A frame without detection for ``rows`` (§3.3 rule 1): update with the prediction, or nothing."""
-        if self.config.missed_update == "prediction":
+        if self.config.missed_update == "prediction" and len(rows):
             self.update(rows, self.x[np.asarray(rows, dtype=np.intp)][:, 0::2])
 
     # -- read-outs ----------------------------------------------------------------------------

@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from multi_target_tracker.association import (COASTING, CONFIRMED, LOST, TENTATIVE, AssociationConfig,
-                                              AssociationError, MultiTargetTracker, angle_matrix, hungarian,
-                                              normalise_by_max, pad_square, seed_cost)
+                                              AssociationError, MultiTargetTracker, all_pairs, angles, gated_pairs,
+                                              hungarian, mahalanobis_squared, normalise_by_max, pad_square,
+                                              seed_cost)
 from multi_target_tracker.kalman import KalmanConfig
 
 FPS = 10.0
@@ -32,14 +33,29 @@ def test_angle_and_normalised_cost_by_hand():
     positions = np.array([[0.0, 0.0], [10.0, 0.0]])
     velocities = np.array([[1.0, 0.0], [0.0, 0.0]])           # second target: no velocity yet
     points = np.array([[1.0, 1.0], [-2.0, 0.0]])
-    theta = angle_matrix(positions, velocities, points, still_speed=0.5)
-    np.testing.assert_allclose(theta[0], [np.pi / 4, np.pi])
-    np.testing.assert_allclose(theta[1], [0.0, 0.0])            # documented choice: θ = 0 without velocity
+    i, j = all_pairs(2, 2)
+    assert i.tolist() == [0, 0, 1, 1] and j.tolist() == [0, 1, 0, 1]
+    theta = angles(positions[i], velocities[i], points[j], still_speed=0.5)
+    np.testing.assert_allclose(theta, [np.pi / 4, np.pi, 0.0, 0.0])   # documented: θ = 0 without velocity
     predicted = positions + [[1.0, 0.0], [0.0, 0.0]]
-    cost = seed_cost(positions, predicted, velocities, points, 0.5)
-    r = np.linalg.norm(points[None] - predicted[:, None], axis=2)
-    np.testing.assert_allclose(cost, theta / np.pi + r / r.max())
-    assert normalise_by_max(np.zeros((2, 2))).max() == 0.0
+    cost = seed_cost(positions[i], predicted[i], velocities[i], points[j], 0.5)
+    r = np.array([1.0, 3.0, np.hypot(9, 1), 12.0])
+    np.testing.assert_allclose(cost, theta / np.pi + r / 12.0)
+    assert normalise_by_max(np.zeros(4)).max() == 0.0
+
+
+def test_mahalanobis_pairs_by_hand_and_kdtree_agrees_with_brute_force():
+    S = np.array([[[4.0, 0.0], [0.0, 1.0]]])
+    d2 = mahalanobis_squared(np.zeros((1, 2)), np.linalg.inv(S), np.array([[2.0, 1.0]]))
+    assert d2[0] == pytest.approx(2.0)                         # 2²/4 + 1²/1
+    rng = np.random.default_rng(1)
+    predicted = rng.uniform(0, 500, (80, 2))
+    points = predicted[rng.permutation(80)[:70]] + rng.normal(0, 3, (70, 2))
+    A = rng.normal(0, 2, (80, 2, 2))
+    S = A @ A.transpose(0, 2, 1) + np.eye(2) * 4
+    brute = gated_pairs(predicted, S, points, 9.21, brute_force_below=10 ** 9)
+    tree = gated_pairs(predicted, S, points, 9.21, brute_force_below=0)
+    assert sorted(zip(*brute)) == sorted(zip(*tree)) and len(brute[0]) >= 60
 
 
 def test_padding_shapes_and_zero_dummies():
