@@ -43,6 +43,7 @@ from aircraft_docking_tracker.evaluation.mot_metrics import MotEvaluator
 from aircraft_docking_tracker.evaluation.sot_metrics import SotMetricsConfig, box_iou, box_to_quad, score_sequence
 from aircraft_docking_tracker.evaluation.speed import latency_percentiles, stream_fps
 from aircraft_docking_tracker.object_table import TRACK_DTYPE
+from multi_target_tracker.motchallenge import boxes as _boxes
 
 IMAGE, DETECTIONS, TRACKS = "image", "detections", "tracks"
 DOCKING_POLYGON, GROUND_TRUTH = "docking/polygon", "ground_truth"
@@ -126,12 +127,6 @@ def _table(msg) -> np.ndarray:
     from aircraft_docking_tracker.object_table import cloud_to_table  # noqa: PLC0415
 
     return cloud_to_table(msg)
-
-
-def _boxes(table: np.ndarray) -> np.ndarray:
-    if len(table) == 0:
-        return np.zeros((0, 4))
-    return np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(np.float64)
 
 
 # --- scoring, one family each ---------------------------------------------------------------------

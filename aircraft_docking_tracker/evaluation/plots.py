@@ -17,6 +17,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from multi_target_tracker.motchallenge import boxes as table_boxes
+
 GT_COLOR = (60, 220, 60)          # BGR
 RESULT_COLOR = (230, 40, 230)
 HIDDEN_COLOR = (40, 40, 230)
@@ -146,29 +148,38 @@ def annotate_scene_frame(frame) -> np.ndarray:
     if hasattr(frame, "quad"):
         return draw_annotations(frame.image, quads=[frame.quad], point=frame.nose)
     gt = frame.ground_truth
-    boxes = np.stack([gt["x"], gt["y"], gt["w"], gt["h"]], axis=1) if len(gt) else np.zeros((0, 4))
-    return draw_annotations(frame.image, boxes=boxes, labels=gt["id"].tolist(), hidden=(gt["state"] == 2).tolist())
+    return draw_annotations(frame.image, boxes=table_boxes(gt), labels=gt["id"].tolist(), hidden=(gt["state"] == 2).tolist())
 
 
-def frame_strip(frames, path: str | Path, tile_width: int = 427) -> Path:
+def strip_image(frames, tile_width: int = 427, caption: str = "") -> np.ndarray:
     """Scene frames (annotated with their ground truth) or plain images side by side, frame numbers on top."""
     tiles = []
     for k, frame in enumerate(frames):
         image = annotate_scene_frame(frame) if hasattr(frame, "image") else np.asarray(frame)
         scale = tile_width / image.shape[1]
         tile = cv2.resize(image, (tile_width, int(round(image.shape[0] * scale))), interpolation=cv2.INTER_AREA)
-        label = f"frame {getattr(frame, 'index', k)}"
+        label = f"{caption + ' ' if caption and k == 0 else ''}frame {getattr(frame, 'index', k)}"
         cv2.putText(tile, label, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 2, cv2.LINE_AA)
         cv2.putText(tile, label, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
         tiles.append(tile)
     if not tiles:
-        raise ValueError("frame_strip: no frames")
+        raise ValueError("frame strip: no frames")
     height = max(t.shape[0] for t in tiles)
     tiles = [cv2.copyMakeBorder(t, 0, height - t.shape[0], 0, 2, cv2.BORDER_CONSTANT, value=(255, 255, 255))
              for t in tiles]
+    return np.hstack(tiles)
+
+
+def frame_strip(frames, path: str | Path, tile_width: int = 427) -> Path:
+    """:func:`strip_image` written as a PNG."""
+    return write_image(strip_image(frames, tile_width), path)
+
+
+def write_image(image: np.ndarray, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), np.hstack(tiles))
+    if not cv2.imwrite(str(path), image):
+        raise OSError(f"could not write {path}")
     return path
 
 

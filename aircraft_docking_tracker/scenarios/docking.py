@@ -82,7 +82,7 @@ class StandCamera:
 
     def __init__(self, width: int, height: int, distance_m: float, height_m: float, pitch_deg: float):
         self.width, self.height = width, height
-        self.f = 0.9 * width
+        self.f = min(0.9 * width, 1.2 * height)         # the whole aircraft in view at 4:3 and 16:9
         self.cx, self.cy = width / 2.0, height / 2.0
         self.position = np.array([0.0, -distance_m, height_m])
         p = np.radians(pitch_deg)
