@@ -1,0 +1,217 @@
+"""Detector core: backend choice, pyramid scan of the boosted cascade, grouping -> detection table.
+
+Pure (numpy + OpenCV). The node, the ``detect`` tool, the trainer's negative mining and the
+benchmark all call :class:`Detector` (or :func:`scan_cascade` for raw windows).
+
+Scan (seed 003 §2: "run over the frame to search for targets"): the model window ``(w0, h0)``
+pixels is searched at scales ``s = s_min * scale_factor^k`` between ``min_size`` and ``max_size``
+(window heights in pixels). At each scale the frame is resized so that one window becomes 32x32
+(texture level; the contour level is twice that) and every window on a ``stride``-pixel grid of
+that level is scored at once by :class:`features.LevelScan` and :meth:`Cascade.evaluate`.
+With ``orientation = both`` the transposed frame is scanned too (objects turned by 90 degrees,
+e.g. cars along the other street axis seen from a UAV). Overlapping windows are grouped by
+non-maximum suppression (``cv2.dnn.NMSBoxes``); a box needs ``min_neighbors`` raw windows
+overlapping it by ``nms_iou`` to be kept.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from aircraft_docking_tracker.config import param
+from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE
+from multi_target_tracker.cascade import Cascade, CascadeError
+from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
+
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+DEFAULT_MODEL = "drone_vehicles_fused.json"
+
+
+class DetectorError(ValueError):
+    """Bad detector input (image, region of interest) or configuration."""
+
+
+@dataclass
+class DetectorConfig:
+    """Detector constants: model, backend, pyramid, grouping, region of interest."""
+
+    backend: str = param("cascade", "cascade: our seed 003 boosted cascade (JSON model); opencv: a "
+                         "cv2.CascadeClassifier XML (Haar/LBP)", choices=("cascade", "opencv"))
+    model: str = param(DEFAULT_MODEL, "model file; a bare name is looked up in multi_target_tracker/models")
+    scale_factor: float = param(1.2, "pyramid step between window scales", low=1.01, high=3.0)
+    stride: int = param(4, "window step in texture-level pixels (one window = 32 px)", choices=(2, 4, 8))
+    min_size: float = param(0.0, "smallest window height searched [px] (0: the model's window)", low=0.0, high=10000.0)
+    max_size: float = param(0.0, "largest window height searched [px] (0: up to the frame)", low=0.0, high=10000.0)
+    orientation: str = param("model", "also scan the transposed frame: model (as trained), upright, both",
+                             choices=("model", "upright", "both"))
+    nms_iou: float = param(0.3, "IoU above which overlapping windows are grouped", low=0.0, high=1.0)
+    min_neighbors: int = param(2, "raw windows a grouped box needs (OpenCV's minNeighbors)", low=0, high=100)
+    score_threshold: float = param(0.0, "minimum last-stage margin (0: the trained cascade; <0 more recall)",
+                                   low=-100.0, high=100.0)
+    roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
+    class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
+    max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
+
+
+def resolve_model(name: str) -> Path:
+    """A model path, or a bare file name inside the package's ``models`` folder."""
+    path = Path(name).expanduser()
+    if not path.is_file() and (MODELS_DIR / name).is_file():
+        path = MODELS_DIR / name
+    if not path.is_file():
+        raise DetectorError(f"model file {name!r} not found (nor in {MODELS_DIR})")
+    return path
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        raise DetectorError(f"expected a uint8 image, got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] in (3, 4):
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+    if image.ndim == 3 and image.shape[2] == 1:
+        return image[:, :, 0]
+    if image.ndim != 2:
+        raise DetectorError(f"expected a grey or BGR image, got shape {image.shape}")
+    return image
+
+
+def window_scales(window: tuple[int, int], frame_size: tuple[int, int], scale_factor: float,
+                  min_size: float = 0.0, max_size: float = 0.0) -> list[float]:
+    """Scales ``s`` (window = ``s * window`` px) from ``min_size`` to ``max_size`` heights that fit the frame."""
+    w0, h0 = window
+    width, height = frame_size
+    s = max(1.0, min_size / h0) if min_size > 0 else 1.0
+    top = min(width / w0, height / h0)
+    if max_size > 0:
+        top = min(top, max_size / h0)
+    scales = []
+    while s <= top + 1e-9:
+        scales.append(s)
+        s *= scale_factor
+    return scales
+
+
+def scan_cascade(gray: np.ndarray, cascade: Cascade, scale_factor: float = 1.2, stride: int = 4,
+                 min_size: float = 0.0, max_size: float = 0.0, last_stage_margin: float = 0.0,
+                 with_vectors: bool = False, select=None):
+    """Every window of the pyramid that the cascade passes: ``(boxes (n,4) xywh, scores, vectors|None)``.
+
+    ``gray`` is scanned upright only (the caller transposes for the other orientation).
+    ``select(boxes) -> indices`` (training) picks which passing windows of a level are returned.
+    """
+    height, width = gray.shape
+    w0, h0 = cascade.window
+    boxes, scores, vectors = [], [], []
+    for s in window_scales(cascade.window, (width, height), scale_factor, min_size, max_size):
+        level = (int(round(width * LBP_SIZE / (w0 * s))), int(round(height * LBP_SIZE / (h0 * s))))
+        scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold)
+        if scan.n_windows == 0:
+            continue
+        idx, score = cascade.evaluate(scan.passes, scan.n_windows, last_stage_margin)
+        if len(idx) == 0:
+            continue
+        fx, fy = width / level[0], height / level[1]
+        origin = scan.window_origins()[idx]
+        level_boxes = np.column_stack([origin[:, 0] * fx, origin[:, 1] * fy,
+                                       np.full(len(idx), LBP_SIZE * fx), np.full(len(idx), LBP_SIZE * fy)])
+        if select is not None:
+            chosen = np.asarray(select(level_boxes), int)
+            idx, score, level_boxes = idx[chosen], score[chosen], level_boxes[chosen]
+        boxes.append(level_boxes)
+        scores.append(score)
+        if with_vectors:
+            vectors.append(scan.vectors(idx))
+    if not boxes:
+        return np.zeros((0, 4)), np.zeros(0), (np.zeros((0, 1152), np.uint8) if with_vectors else None)
+    return (np.vstack(boxes), np.concatenate(scores),
+            np.vstack(vectors) if with_vectors else None)
+
+
+def group_boxes(boxes: np.ndarray, scores: np.ndarray, nms_iou: float, min_neighbors: int,
+                max_detections: int) -> np.ndarray:
+    """Greedy NMS (``cv2.dnn.NMSBoxes``) and a neighbour count; returns the kept indices, best first."""
+    if len(boxes) == 0:
+        return np.zeros(0, int)
+    shifted = (scores - scores.min() + 1.0).astype(float)  # NMSBoxes keeps scores > its threshold 0
+    keep = cv2.dnn.NMSBoxes(boxes.tolist(), shifted.tolist(), 0.0, nms_iou)
+    keep = np.asarray(keep, int).reshape(-1)
+    if min_neighbors > 1 and len(keep):
+        neighbours = (box_iou(boxes[keep][:, None, :], boxes[None, :, :]) >= nms_iou).sum(axis=1)
+        keep = keep[neighbours >= min_neighbors]
+    return keep[:max_detections]
+
+
+class Detector:
+    """Image in, DETECTION_DTYPE table out, with either backend."""
+
+    def __init__(self, config: DetectorConfig | None = None):
+        self.config = config or DetectorConfig()
+        cfg = self.config
+        if len(cfg.roi) != 4:
+            raise DetectorError(f"roi needs 4 numbers x, y, w, h, got {cfg.roi}")
+        path = resolve_model(cfg.model)
+        self.cascade = self.opencv = None
+        if cfg.backend == "cascade":
+            try:
+                self.cascade = Cascade.load(path)
+            except CascadeError as exc:
+                raise DetectorError(str(exc)) from exc
+            self.window = self.cascade.window
+        else:
+            from multi_target_tracker.opencv_backend import OpenCVCascade  # noqa: PLC0415
+
+            self.opencv = OpenCVCascade(path)
+            self.window = self.opencv.window
+        orientation = cfg.orientation
+        if orientation == "model":
+            orientation = "both" if (self.cascade is not None and self.cascade.rotate90) else "upright"
+        self.both_orientations = orientation == "both"
+
+    def raw(self, gray: np.ndarray, last_stage_margin: float | None = None):
+        """Ungrouped windows ``(boxes, scores)`` in ``gray``'s pixels, both orientations if configured."""
+        cfg = self.config
+        margin = cfg.score_threshold if last_stage_margin is None else last_stage_margin
+        views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
+        all_boxes, all_scores = [], []
+        for view, transposed in views:
+            if self.cascade is not None:
+                boxes, scores, _ = scan_cascade(view, self.cascade, cfg.scale_factor, cfg.stride,
+                                                cfg.min_size, cfg.max_size, margin)
+            else:
+                boxes, scores = self.opencv.detect(view, cfg.scale_factor, cfg.min_neighbors,
+                                                   cfg.min_size, cfg.max_size)
+            if transposed:
+                boxes = boxes[:, [1, 0, 3, 2]]
+            all_boxes.append(boxes)
+            all_scores.append(scores)
+        return np.vstack(all_boxes), np.concatenate(all_scores)
+
+    def detect(self, image: np.ndarray, last_stage_margin: float | None = None) -> np.ndarray:
+        """Detections in ``image`` (grey or BGR uint8), best score first."""
+        cfg = self.config
+        gray = to_gray(image)
+        x0, y0 = 0, 0
+        rx, ry, rw, rh = (int(v) for v in cfg.roi)
+        if rw > 0 and rh > 0:
+            x0, y0 = max(0, rx), max(0, ry)
+            gray = gray[y0:ry + rh, x0:rx + rw]
+            if gray.size == 0:
+                raise DetectorError(f"roi {cfg.roi} lies outside the {image.shape[1]}x{image.shape[0]} frame")
+        try:
+            boxes, scores = self.raw(gray, last_stage_margin)
+        except FeatureError as exc:
+            raise DetectorError(str(exc)) from exc
+        if self.cascade is not None:
+            keep = group_boxes(boxes, scores, cfg.nms_iou, cfg.min_neighbors, cfg.max_detections)
+        else:  # OpenCV grouped already (minNeighbors); merge the two orientations by NMS only
+            keep = group_boxes(boxes, scores, cfg.nms_iou, 0, cfg.max_detections)
+        out = np.zeros(len(keep), DETECTION_DTYPE)
+        out["x"], out["y"] = boxes[keep, 0] + x0, boxes[keep, 1] + y0
+        out["w"], out["h"] = boxes[keep, 2], boxes[keep, 3]
+        out["score"], out["class_id"] = scores[keep], cfg.class_id
+        return out

@@ -1,0 +1,368 @@
+"""``train_cascade``: train the seed 003 boosted cascade from labelled images (offline tool).
+
+Positives: boxes from YOLO folders (``images/`` + ``labels/*.txt``, ``class cx cy w h``
+normalised), Pascal VOC folders (``*.xml`` next to or under ``Annotations/``) or ground-truth bags
+(``image`` + ``ground_truth`` / ``ground_truth/polygon`` topics). Each box is cut with the one-pixel
+rim the features need and goes through the very same :class:`features.LevelScan` as detection.
+Negatives: every window of the training images whose IoU with each box is below
+``--negative-iou``, plus whole negative images; from stage 2 on only the windows the cascade so
+far accepts (bootstrapping). Writes a JSON model (no pickle).
+
+Example (the shipped drone-view vehicle model)::
+
+    train_cascade --yolo ../shared/data/detect/drone-view-vehicles --exclude-prefix 1_ 4_ \\
+        --window 64 32 --rotate90 --flips hv --output multi_target_tracker/models/drone_vehicles_fused.json
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import cv2
+import numpy as np
+
+from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments
+from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from multi_target_tracker.cascade import Cascade, CascadeTrainConfig, train_cascade
+from multi_target_tracker.detector import scan_cascade, window_scales
+from multi_target_tracker.features import FUSED_DIM, LBP_SIZE, FeatureConfig, LevelScan
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
+
+
+class TrainingDataError(ValueError):
+    """Labelled data that cannot be read or holds no usable box."""
+
+
+@dataclass
+class LabelledImage:
+    """One training image: a loader (grey uint8) and its boxes (n, 4) x, y, w, h in pixels."""
+
+    name: str
+    load: Callable[[], np.ndarray]
+    boxes: np.ndarray
+
+
+def _prefix_ok(name: str, include: list[str] | None, exclude: list[str] | None) -> bool:
+    if include and not any(name.startswith(p) for p in include):
+        return False
+    return not (exclude and any(name.startswith(p) for p in exclude))
+
+
+def _imread_gray(path: Path) -> Callable[[], np.ndarray]:
+    def load() -> np.ndarray:
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if image is None:
+            raise TrainingDataError(f"cannot read image {path}")
+        return image
+    return load
+
+
+def read_yolo_folder(folder: str | Path, include: list[str] | None = None, exclude: list[str] | None = None,
+                     classes: list[int] | None = None) -> list[LabelledImage]:
+    """A YOLO folder (``images/`` and ``labels/`` side by side); file-name prefix filters for splits."""
+    folder = Path(folder)
+    images_dir = folder / "images" if (folder / "images").is_dir() else folder
+    labels_dir = folder / "labels" if (folder / "labels").is_dir() else folder
+    out = []
+    for image_path in sorted(p for p in images_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES):
+        if not _prefix_ok(image_path.name, include, exclude):
+            continue
+        label = labels_dir / (image_path.stem + ".txt")
+        rows = []
+        if label.is_file():
+            for line in label.read_text().splitlines():
+                parts = line.split()
+                if len(parts) >= 5 and (classes is None or int(float(parts[0])) in classes):
+                    rows.append([float(v) for v in parts[1:5]])
+        size = _image_size(image_path)
+        boxes = np.zeros((len(rows), 4))
+        if rows:
+            r = np.asarray(rows)
+            w, h = r[:, 2] * size[0], r[:, 3] * size[1]
+            boxes = np.column_stack([r[:, 0] * size[0] - w / 2, r[:, 1] * size[1] - h / 2, w, h])
+        out.append(LabelledImage(image_path.name, _imread_gray(image_path), boxes))
+    if not out:
+        raise TrainingDataError(f"no images in {images_dir} (after prefix filters)")
+    return out
+
+
+def _image_size(path: Path) -> tuple[int, int]:
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise TrainingDataError(f"cannot read image {path}")
+    return image.shape[1], image.shape[0]
+
+
+def read_voc_folder(folder: str | Path, include: list[str] | None = None, exclude: list[str] | None = None,
+                    names: list[str] | None = None) -> list[LabelledImage]:
+    """Pascal VOC: ``*.xml`` annotations (``Annotations/`` or the folder) and images beside them."""
+    folder = Path(folder)
+    ann_dir = folder / "Annotations" if (folder / "Annotations").is_dir() else folder
+    img_dirs = [folder / "JPEGImages", folder / "images", folder, ann_dir]
+    out = []
+    for xml_path in sorted(ann_dir.glob("*.xml")):
+        root = ET.parse(xml_path).getroot()
+        filename = root.findtext("filename") or xml_path.stem + ".jpg"
+        if not _prefix_ok(filename, include, exclude):
+            continue
+        image_path = next((d / filename for d in img_dirs if (d / filename).is_file()), None)
+        if image_path is None:
+            continue
+        rows = []
+        for obj in root.iter("object"):
+            if names and obj.findtext("name") not in names:
+                continue
+            bb = obj.find("bndbox")
+            x0, y0, x1, y1 = (float(bb.findtext(k)) for k in ("xmin", "ymin", "xmax", "ymax"))
+            rows.append([x0, y0, x1 - x0, y1 - y0])
+        out.append(LabelledImage(filename, _imread_gray(image_path), np.asarray(rows).reshape(-1, 4)))
+    if not out:
+        raise TrainingDataError(f"no VOC annotations with images in {folder}")
+    return out
+
+
+def read_bag(path: str | Path, every: int = 1) -> list[LabelledImage]:
+    """Frames of a ground-truth bag: ``image`` and ``ground_truth`` (table) or ``ground_truth/polygon``."""
+    from aircraft_docking_tracker.bag import BagReader, stamp_to_ns  # noqa: PLC0415
+    from aircraft_docking_tracker.images import to_mono8  # noqa: PLC0415
+    from aircraft_docking_tracker.object_table import cloud_to_table  # noqa: PLC0415
+
+    images, truth = {}, {}
+    reader = BagReader(path)
+    for topic, msg, _ in reader.ros_messages(["image", "ground_truth", "ground_truth/polygon"]):
+        stamp = stamp_to_ns(msg.header.stamp)
+        if topic == "image":
+            images[stamp] = to_mono8(msg)
+        elif topic == "ground_truth":
+            t = cloud_to_table(msg)
+            truth[stamp] = np.column_stack([t["x"], t["y"], t["w"], t["h"]]).astype(float) if len(t) else np.zeros((0, 4))
+        else:
+            pts = np.array([[p.x, p.y] for p in msg.polygon.points]).reshape(-1, 2)
+            if len(pts):
+                lo, hi = pts.min(axis=0), pts.max(axis=0)
+                truth[stamp] = np.array([[lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]]])
+    out = []
+    for k, stamp in enumerate(sorted(set(images) & set(truth))):
+        if k % every == 0:
+            image = images[stamp]
+            out.append(LabelledImage(f"{Path(path).name}@{stamp}", lambda image=image: image, truth[stamp]))
+    if not out:
+        raise TrainingDataError(f"{path}: no frame has both 'image' and ground truth")
+    return out
+
+
+def truncated(boxes: np.ndarray, size: tuple[int, int], margin: float = 1.0) -> np.ndarray:
+    """Boxes touching the frame border (cut by it): True per box."""
+    w, h = size
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    return (b[:, 0] < margin) | (b[:, 1] < margin) | (b[:, 0] + b[:, 2] > w - margin) | (b[:, 1] + b[:, 3] > h - margin)
+
+
+def positive_vector(gray: np.ndarray, box, feature_set: str, edge_threshold: float) -> np.ndarray | None:
+    """The floored 1152-d vector of one box: the box plus its rim resized to one 34x34 level window."""
+    x, y, w, h = (float(v) for v in box)
+    rx, ry = w / LBP_SIZE, h / LBP_SIZE        # one texture-level pixel in frame pixels
+    x0, y0 = int(math.floor(x - rx)), int(math.floor(y - ry))
+    x1, y1 = int(math.ceil(x + w + rx)), int(math.ceil(y + h + ry))
+    if x0 < 0 or y0 < 0 or x1 > gray.shape[1] or y1 > gray.shape[0] or w < 4 or h < 4:
+        return None
+    scan = LevelScan(gray[y0:y1, x0:x1], (LBP_SIZE + 2, LBP_SIZE + 2), 2, feature_set, edge_threshold)
+    return scan.vectors(np.zeros(1, int))[0]
+
+
+FLIPS = {"none": [], "h": [1], "v": [0], "hv": [1, 0, -1]}
+
+
+def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature_set: str, edge_threshold: float,
+                     rotate90: bool, flips: str, keep_truncated: bool = False, max_positives: int = 0,
+                     rng: np.random.Generator | None = None, jitter: int = 0,
+                     jitter_shift: float = 0.0625, jitter_scale: float = 1.1) -> tuple[np.ndarray, np.ndarray]:
+    """Vectors of every usable box (turned to the window's orientation when ``rotate90``) and its flips,
+    and the window-orientation heights of the boxes used.
+
+    ``jitter`` extra copies per view are shifted by up to ``jitter_shift`` of the box size and scaled
+    by up to ``jitter_scale``: the scan meets objects only on its stride grid and scale steps.
+    """
+    rng = rng or np.random.default_rng(0)
+    wide = window[0] >= window[1]
+    out, heights = [], []
+    for item in data:
+        gray = item.load()
+        size = (gray.shape[1], gray.shape[0])
+        for box, cut in zip(item.boxes, truncated(item.boxes, size)):
+            if cut and not keep_truncated:
+                continue
+            views = [(gray, box)]
+            if rotate90 and (box[2] >= box[3]) != wide:
+                views = [(np.ascontiguousarray(gray.T), box[[1, 0, 3, 2]])]
+            g, b = views[0]
+            heights.append(b[3])
+            views += [(cv2.flip(g, code), _flip_box(b, code, g.shape)) for code in FLIPS[flips]]
+            for g, b in views:
+                jittered = [b]
+                for _ in range(jitter):
+                    scale = jitter_scale ** rng.uniform(-1, 1)
+                    w, h = b[2] * scale, b[3] * scale
+                    dx, dy = rng.uniform(-jitter_shift, jitter_shift, 2) * (b[2], b[3])
+                    jittered.append(np.array([b[0] + (b[2] - w) / 2 + dx, b[1] + (b[3] - h) / 2 + dy, w, h]))
+                for bj in jittered:
+                    v = positive_vector(g, bj, feature_set, edge_threshold)
+                    if v is not None:
+                        out.append(v)
+    x = np.asarray(out, np.uint8).reshape(-1, FUSED_DIM)
+    if max_positives and len(x) > max_positives:
+        x = x[np.sort(rng.choice(len(x), max_positives, replace=False))]
+    return x, np.asarray(heights, float)
+
+
+def _flip_box(box, code: int, shape) -> np.ndarray:
+    x, y, w, h = box
+    height, width = shape
+    if code in (1, -1):
+        x = width - x - w
+    if code in (0, -1):
+        y = height - y - h
+    return np.array([x, y, w, h])
+
+
+class NegativeMiner:
+    """Windows of the training images away from every box that the cascade so far accepts."""
+
+    def __init__(self, data: list[LabelledImage], negative_images: list[Path], scan: dict, rotate90: bool,
+                 negative_iou: float = 0.3, rng: np.random.Generator | None = None):
+        self.data, self.negative_images = data, negative_images
+        self.scan, self.rotate90, self.negative_iou = scan, rotate90, negative_iou
+        self.rng = rng or np.random.default_rng(0)
+
+    def _sources(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        order = list(range(len(self.data) + len(self.negative_images)))
+        self.rng.shuffle(order)
+        for k in order:
+            if k < len(self.data):
+                yield self.data[k].load(), self.data[k].boxes
+            else:
+                image = cv2.imread(str(self.negative_images[k - len(self.data)]), cv2.IMREAD_GRAYSCALE)
+                if image is not None:
+                    yield image, np.zeros((0, 4))
+
+    def __call__(self, cascade: Cascade, n: int) -> np.ndarray:
+        per_image = max(4, int(math.ceil(4 * n / max(1, len(self.data) + len(self.negative_images)))))
+        found, total = [], 0
+        for gray, boxes in self._sources():
+            views = [(gray, boxes)]
+            if self.rotate90:
+                views.append((np.ascontiguousarray(gray.T), boxes[:, [1, 0, 3, 2]]))
+            for g, b in views:
+                n_levels = len(window_scales(cascade.window, g.shape[::-1], self.scan["scale_factor"],
+                                             self.scan["min_size"], self.scan["max_size"]))
+                cap = max(1, int(math.ceil(per_image / max(1, n_levels))))
+
+                def select(wins, b=b, cap=cap):
+                    ok = np.arange(len(wins))
+                    if len(b):
+                        ok = ok[box_iou(wins[:, None, :], b[None, :, :]).max(axis=1) < self.negative_iou]
+                    return ok if len(ok) <= cap else self.rng.choice(ok, cap, replace=False)
+
+                _, _, vec = scan_cascade(g, cascade, with_vectors=True, select=select, **self.scan)
+                found.append(vec)
+                total += len(vec)
+            if total >= n:
+                break
+        x = np.vstack(found) if found else np.zeros((0, FUSED_DIM), np.uint8)
+        return x[:n]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="train_cascade", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--yolo", nargs="*", default=[], help="YOLO folders (images/ + labels/)")
+    p.add_argument("--voc", nargs="*", default=[], help="Pascal VOC folders")
+    p.add_argument("--bag", nargs="*", default=[], help="ground-truth bags (image + ground_truth topics)")
+    p.add_argument("--bag-every", type=int, default=1, help="use every k-th frame of a bag")
+    p.add_argument("--negative-images", nargs="*", default=[], help="folders of images with no object")
+    p.add_argument("--include-prefix", nargs="*", default=None, help="only image files with these name prefixes")
+    p.add_argument("--exclude-prefix", nargs="*", default=None, help="skip image files with these name prefixes")
+    p.add_argument("--class-ids", nargs="*", type=int, default=None, help="YOLO classes used as positives")
+    p.add_argument("--window", nargs=2, type=int, default=[64, 32], metavar=("W", "H"),
+                   help="window size in frame pixels at scale 1 (the smallest object searched)")
+    p.add_argument("--rotate90", action="store_true", help="objects appear turned by 90 degrees too: "
+                   "train on boxes turned to the window's orientation, detect on the frame and its transpose")
+    p.add_argument("--flips", choices=sorted(FLIPS), default="h", help="mirror augmentations of positives")
+    p.add_argument("--keep-truncated", action="store_true", help="also use boxes cut by the frame border")
+    p.add_argument("--jitter", type=int, default=2, help="randomly shifted/scaled copies per positive view")
+    p.add_argument("--max-positives", type=int, default=0, help="subsample positives to this many (0: all)")
+    p.add_argument("--negative-iou", type=float, default=0.3, help="a negative window overlaps every box less")
+    p.add_argument("--scale-factor", type=float, default=1.2, help="pyramid step while mining negatives")
+    p.add_argument("--stride", type=int, default=4, choices=(2, 4, 8), help="scan stride while mining negatives")
+    p.add_argument("--min-size", type=float, default=0.0, help="smallest window height mined [px] (0: auto)")
+    p.add_argument("--max-size", type=float, default=0.0, help="largest window height mined [px] (0: auto)")
+    p.add_argument("--edge-threshold", type=float, default=FeatureConfig().edge_threshold,
+                   help="|Laplacian| binarisation threshold of the contour features")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--output", "-o", required=True, help="model file to write (.json)")
+    add_config_arguments(p, CascadeTrainConfig)
+    return p
+
+
+def load_training_data(args) -> list[LabelledImage]:
+    data: list[LabelledImage] = []
+    for folder in args.yolo:
+        data += read_yolo_folder(folder, args.include_prefix, args.exclude_prefix, args.class_ids)
+    for folder in args.voc:
+        data += read_voc_folder(folder, args.include_prefix, args.exclude_prefix)
+    for bag in args.bag:
+        data += read_bag(bag, args.bag_every)
+    if not data:
+        raise TrainingDataError("no training data: give --yolo, --voc or --bag")
+    return data
+
+
+def run(args) -> Cascade:
+    cfg = config_from_arguments(CascadeTrainConfig, args)
+    rng = np.random.default_rng(args.seed)
+    data = load_training_data(args)
+    window = (int(args.window[0]), int(args.window[1]))
+    t0 = time.perf_counter()
+    say = lambda msg: print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)  # noqa: E731
+    xp, heights = positive_vectors(data, window, cfg.feature_set, args.edge_threshold, args.rotate90,
+                                   args.flips, args.keep_truncated, args.max_positives, rng, args.jitter,
+                                   args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5)
+    say(f"{len(data)} images, {len(xp)} positive vectors")
+    min_size = args.min_size or (float(np.percentile(heights, 2)) * 0.85 if len(heights) else 0.0)
+    max_size = args.max_size or (float(np.percentile(heights, 98)) * 1.15 if len(heights) else 0.0)
+    negatives = [p for folder in args.negative_images for p in sorted(Path(folder).iterdir())
+                 if p.suffix.lower() in IMAGE_SUFFIXES]
+    miner = NegativeMiner(data, negatives, dict(scale_factor=args.scale_factor, stride=args.stride,
+                                                min_size=min_size, max_size=max_size),
+                          args.rotate90, args.negative_iou, rng)
+    say(f"mining negatives at window heights {min_size:.0f}..{max_size:.0f} px")
+    cascade = train_cascade(xp, miner, cfg, window, args.edge_threshold, args.rotate90, progress=say)
+    cascade.info.update({"data": [str(p) for p in args.yolo + args.voc + args.bag],
+                         "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
+                         "flips": args.flips, "search_min_size": min_size, "search_max_size": max_size,
+                         "train_seconds": round(time.perf_counter() - t0, 1)})
+    Path(args.output).parent.mkdir(parents=True, exist_ok=True)
+    cascade.save(args.output)
+    say(f"wrote {args.output}: {len(cascade.stages)} stages, {cascade.n_stumps} stumps")
+    return cascade
+
+
+def main(args=None) -> int:
+    parsed = build_parser().parse_args(args)
+    try:
+        run(parsed)
+    except (TrainingDataError, ValueError) as exc:
+        print(f"train_cascade: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

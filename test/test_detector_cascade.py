@@ -1,0 +1,136 @@
+"""The boosted cascade: training on a tiny synthetic set finds its targets; model file; grouping."""
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from multi_target_tracker.cascade import Cascade, CascadeError, CascadeTrainConfig, Stage, train_cascade
+from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_boxes
+from multi_target_tracker.train_cascade import LabelledImage, NegativeMiner, positive_vectors
+
+WINDOW = (48, 24)
+
+
+def _scene(rng, n_targets, size=(200, 160)):
+    """Textured background with dark 48x24 'vehicles' (bright roof, dark windows)."""
+    w, h = size
+    image = cv2.GaussianBlur(rng.integers(60, 200, (h, w), dtype=np.uint8), (0, 0), 3)
+    image = cv2.add(image, rng.integers(0, 30, (h, w), dtype=np.uint8))
+    for _ in range(6):  # clutter: lines and blobs
+        p = rng.integers(0, (w, h), 2)
+        q = p + rng.integers(-60, 60, 2)
+        cv2.line(image, tuple(int(v) for v in p), tuple(int(v) for v in q), int(rng.integers(0, 255)), 2)
+    boxes = []
+    while len(boxes) < n_targets:
+        bw, bh = int(rng.integers(44, 56)), 0
+        bh = bw // 2
+        x, y = int(rng.integers(4, w - bw - 4)), int(rng.integers(4, h - bh - 4))
+        if boxes and box_iou(np.array(boxes, float), np.array([x, y, bw, bh], float)).max() > 0:
+            continue
+        cv2.rectangle(image, (x, y), (x + bw, y + bh), 25, -1)
+        cv2.rectangle(image, (x + bw // 4, y + 3), (x + 3 * bw // 4, y + bh - 4), 235, -1)
+        cv2.rectangle(image, (x + bw // 4 - 5, y + 4), (x + bw // 4 - 2, y + bh - 5), 90, -1)
+        boxes.append([x, y, bw, bh])
+    return image, np.array(boxes, float)
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory):
+    rng = np.random.default_rng(7)
+    data = []
+    for k in range(20):
+        image, boxes = _scene(rng, 3)
+        data.append(LabelledImage(f"s{k}", lambda image=image: image, boxes))
+    xp, heights = positive_vectors(data, WINDOW, "fused", 40.0, False, "hv", rng=rng, jitter=2,
+                                   jitter_shift=2 / 32, jitter_scale=1.15 ** 0.5)
+    assert 3 * 4 * 60 - 10 <= len(xp) <= 3 * 4 * 60 and heights.min() >= 22  # a jitter may leave the frame
+    miner = NegativeMiner(data, [], dict(scale_factor=1.15, stride=4, min_size=20, max_size=30), False, 0.3, rng)
+    cfg = CascadeTrainConfig(stages=6, negatives=400, max_stumps=15, hit_rate=0.995, false_alarm_rate=0.5)
+    cascade = train_cascade(xp, miner, cfg, WINDOW, 40.0)
+    path = tmp_path_factory.mktemp("model") / "tiny.json"
+    cascade.save(path)
+    return path, cascade
+
+
+def test_tiny_cascade_finds_its_targets(tiny_model):
+    path, cascade = tiny_model
+    assert len(cascade.stages) >= 2
+    det = Detector(DetectorConfig(model=str(path), scale_factor=1.1, min_size=20, max_size=30, min_neighbors=2,
+                                  nms_iou=0.2))
+    rng = np.random.default_rng(123)
+    found = total = false = 0
+    for _ in range(3):
+        image, truth = _scene(rng, 3)
+        out = det.detect(image)
+        boxes = np.column_stack([out["x"], out["y"], out["w"], out["h"]])
+        iou = box_iou(boxes[:, None, :], truth[None, :, :]) if len(boxes) else np.zeros((0, 3))
+        found += int((iou.max(axis=0) >= 0.5).sum()) if len(boxes) else 0
+        false += int((iou.max(axis=1) < 0.5).sum()) if len(boxes) else 0
+        total += len(truth)
+    assert found >= total - 1, (found, total)
+    assert false <= 3, false
+
+
+def test_model_round_trip_and_bad_files(tiny_model, tmp_path):
+    path, cascade = tiny_model
+    again = Cascade.load(path)
+    assert again.window == WINDOW and again.feature_set == "fused" and again.n_stumps == cascade.n_stumps
+    x = np.random.default_rng(0).integers(0, 256, (50, 1152), dtype=np.uint8)
+    assert np.array_equal(cascade.evaluate_vectors(x)[0], again.evaluate_vectors(x)[0])
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(CascadeError):
+        Cascade.load(bad)
+    d = json.loads(path.read_text())
+    d["stages"][0]["features"][0] = 5000
+    bad.write_text(json.dumps(d))
+    with pytest.raises(CascadeError):
+        Cascade.load(bad)
+    d = json.loads(path.read_text())
+    d["feature_set"] = "lbp"
+    d["stages"][0]["features"][0] = 1100  # a contour feature in an lbp-only model
+    bad.write_text(json.dumps(d))
+    with pytest.raises(CascadeError):
+        Cascade.load(bad)
+    with pytest.raises(DetectorError):
+        Detector(DetectorConfig(model=str(tmp_path / "missing.json")))
+
+
+def test_stage_and_cascade_evaluation_by_hand():
+    stage = Stage(np.array([0, 1024]), np.array([100, 10]), np.array([-1.0, -0.5]), np.array([1.0, 0.5]), 0.9)
+    cascade = Cascade((32, 32), "fused", 40.0, [stage])
+    x = np.zeros((3, 1152), np.uint8)
+    x[0, 0], x[0, 1024] = 150, 20     # 1 + 0.5 = 1.5 >= 0.9
+    x[1, 0], x[1, 1024] = 150, 5      # 1 - 0.5 = 0.5 < 0.9
+    x[2, 0], x[2, 1024] = 99, 255     # -1 + 0.5
+    idx, score = cascade.evaluate_vectors(x)
+    assert idx.tolist() == [0] and score == pytest.approx([0.6])
+    idx, _ = cascade.evaluate_vectors(x, last_stage_margin=-0.5)
+    assert idx.tolist() == [0, 1]
+
+
+def test_group_boxes_nms_and_neighbours():
+    boxes = np.array([[10, 10, 40, 20], [12, 11, 40, 20], [11, 9, 40, 20], [100, 100, 40, 20]], float)
+    scores = np.array([1.0, 3.0, 2.0, 5.0])
+    keep = group_boxes(boxes, scores, 0.3, 1, 10)
+    assert keep.tolist() == [3, 1]
+    keep = group_boxes(boxes, scores, 0.3, 2, 10)   # the lone box has no neighbour
+    assert keep.tolist() == [1]
+    assert group_boxes(np.zeros((0, 4)), np.zeros(0), 0.3, 1, 10).tolist() == []
+
+
+def test_discrete_adaboost_trains_too():
+    rng = np.random.default_rng(0)
+    xp = rng.integers(100, 256, (200, 1152), dtype=np.uint8)
+    xp[:, 1024:] = 0
+
+    def mine(cascade, n):
+        x = rng.integers(0, 156, (n, 1152), dtype=np.uint8)
+        return x[cascade.evaluate_vectors(x)[0]] if cascade.stages else x
+
+    cfg = CascadeTrainConfig(stages=2, negatives=200, boost="discrete", feature_set="lbp", max_stumps=5)
+    cascade = train_cascade(xp, mine, cfg, (32, 32), 40.0)
+    assert cascade.used_features().max() < 1024
+    assert len(cascade.evaluate_vectors(xp)[0]) >= 190

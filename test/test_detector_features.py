@@ -1,0 +1,84 @@
+"""Seed 003 §2.1-2.2 features against hand-computed cases, and the fast scan against the reference."""
+import cv2
+import numpy as np
+import pytest
+
+from multi_target_tracker import features as F
+
+
+def test_lbp_code_hand_computed():
+    # neighbours clockwise from the top-left are bits 0..7; bit set when neighbour >= centre
+    g = np.array([[9, 1, 5],
+                  [1, 5, 7],
+                  [5, 0, 2]], np.uint8)
+    # top-left 9>=5 (bit0), top 1 (no), top-right 5>=5 (bit2), right 7 (bit3), bottom-right 2 (no),
+    # bottom 0 (no), bottom-left 5>=5 (bit6), left 1 (no)
+    assert F.lbp_codes(g).tolist() == [[1 + 4 + 8 + 64]]
+    flat = np.full((4, 5), 7, np.uint8)
+    assert (F.lbp_codes(flat) == 255).all() and F.lbp_codes(flat).shape == (2, 3)
+
+
+def test_lbp_histograms_count_each_block():
+    codes = np.zeros((32, 32), np.uint8)
+    codes[:16, 16:] = 3          # top-right block all code 3
+    codes[20, 4] = 200           # one pixel of the bottom-left block
+    v = F.lbp_histograms(codes)
+    assert v.shape == (1024,) and v.sum() == 1024
+    assert v[0] == 256 and v[256 + 3] == 256 and v[512 + 0] == 255 and v[512 + 200] == 1 and v[768] == 256
+
+
+def test_potential_sequences_hand_computed():
+    b = np.zeros((4, 4), np.uint8)
+    b[0, 1] = 1   # top row: height 4 above the bottom axis, distance 2 from the left axis
+    b[3, 1] = 1   # bottom row: height 1
+    b[2, 3] = 1   # row 2: height 2, column 3: distance 4
+    px, py = F.potential_sequences(b)
+    assert px.tolist() == [0, 4 + 1, 0, 2]
+    assert py.tolist() == [2, 0, 4, 2]
+
+
+def test_scale_to_255_eqs_3_4():
+    assert F.scale_to_255(np.array([0, 2, 4])).tolist() == [0.0, 127.5, 255.0]
+    assert F.scale_to_255(np.zeros(3)).tolist() == [0.0, 0.0, 0.0]
+
+
+def test_window_features_shape_and_parts_normalised():
+    rng = np.random.default_rng(1)
+    v = F.window_features(rng.integers(0, 255, (34, 34), dtype=np.uint8),
+                          rng.integers(0, 255, (66, 66), dtype=np.uint8), 40.0)
+    assert v.shape == (F.FUSED_DIM,)
+    assert v[:1024].max() == 255.0 and v[1024:].max() == 255.0 and v.min() >= 0
+    with pytest.raises(F.FeatureError):
+        F.window_features(np.zeros((32, 32), np.uint8), np.zeros((66, 66), np.uint8), 40.0)
+
+
+@pytest.mark.parametrize("stride", [2, 4, 8])
+def test_level_scan_equals_reference_window_by_window(stride):
+    rng = np.random.default_rng(stride)
+    frame = cv2.GaussianBlur(rng.integers(0, 255, (150, 190), dtype=np.uint8), (5, 5), 1.5)
+    cv2.rectangle(frame, (40, 30), (90, 60), 230, -1)
+    level = (121, 97)
+    scan = F.LevelScan(frame, level, stride, "fused", 12.0)
+    gl = cv2.resize(frame, level, interpolation=cv2.INTER_AREA)
+    gc = cv2.resize(frame, (2 * level[0], 2 * level[1]), interpolation=cv2.INTER_AREA)
+    windows = rng.choice(scan.n_windows, 25, replace=False)
+    vectors = scan.vectors(windows)
+    for w, vec in zip(windows, vectors):
+        y, x = divmod(int(w), scan.cols)
+        y, x = y * stride, x * stride
+        ref = F.window_features(gl[y:y + 34, x:x + 34], gc[2 * y + 1:2 * y + 67, 2 * x + 1:2 * x + 67], 12.0)
+        assert np.array_equal(F.quantised(ref), vec)
+    for feature in (7, 255 + 256 * 3, 1024 + 10, 1024 + 100):
+        for t in (1, 64, 200):
+            assert np.array_equal(scan.passes(feature, t, windows), vectors[:, feature] >= t)
+
+
+def test_feature_sets_and_bad_input():
+    assert len(F.feature_range("lbp")) == 1024 and F.feature_range("contour")[0] == 1024
+    with pytest.raises(F.FeatureError):
+        F.feature_range("hog")
+    with pytest.raises(F.FeatureError):
+        F.LevelScan(np.zeros((50, 50), np.uint8), (40, 40), 3, "fused", 10.0)
+    with pytest.raises(F.FeatureError):
+        F.lbp_codes(np.zeros((10, 10), np.float32))
+    assert F.LevelScan(np.zeros((50, 50), np.uint8), (20, 20), 4, "fused", 10.0).n_windows == 0
