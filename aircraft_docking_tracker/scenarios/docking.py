@@ -320,14 +320,16 @@ class DockingScene:
             middle = int(rng.uniform(0.35, 0.75) * self.n_move)
             _, nose_ground, _ = self.pose(middle)
             nose_depth = float(self.camera.depth([*nose_ground, NOSE_HEIGHT_M])[0])
-            depth = max(nose_depth - float(rng.uniform(6.0, 12.0)), 12.0)
+            depth = max(nose_depth - float(rng.uniform(3.0, 8.0)), 12.0)
             y = depth + self.camera.position[1]          # ground Y at that depth (small pitch)
-            half_span = 0.9 * depth * self.camera.width / (2 * self.camera.f)
+            length = float(rng.uniform(6.0, 9.0))
+            # cross just the aircraft's image (its span seen at the vehicle's depth), in front of it
+            half_span = 0.6 * WINGSPAN_M * depth / nose_depth + length / 2
             direction = float(rng.choice([-1.0, 1.0]))
             self.vehicle = {
                 "t0": middle - duration // 2, "t1": middle + duration // 2, "y": y,
                 "x0": nose_ground[0] - direction * half_span, "x1": nose_ground[0] + direction * half_span,
-                "length": float(rng.uniform(6.0, 9.0)), "height": float(rng.uniform(2.8, 4.2)),
+                "length": length, "height": float(rng.uniform(3.5, 5.0)),
                 "color": tuple(float(c) for c in rng.choice([[20, 160, 230], [230, 230, 230], [40, 90, 200]])),
             }
         self.jet_bridge = self.occluder in ("jet_bridge", "both")
