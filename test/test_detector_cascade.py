@@ -36,8 +36,8 @@ def _scene(rng, n_targets, size=(200, 160)):
     return image, np.array(boxes, float)
 
 
-@pytest.fixture(scope="module")
-def tiny_model(tmp_path_factory):
+def train_tiny_model(path):
+    """A 48x24 cascade trained on 20 synthetic scenes (a few seconds); saved to ``path``."""
     rng = np.random.default_rng(7)
     data = []
     for k in range(20):
@@ -49,16 +49,23 @@ def tiny_model(tmp_path_factory):
     miner = NegativeMiner(data, [], dict(scale_factor=1.15, stride=4, min_size=20, max_size=30), False, 0.3, rng)
     cfg = CascadeTrainConfig(stages=6, negatives=400, max_stumps=15, hit_rate=0.995, false_alarm_rate=0.5)
     cascade = train_cascade(xp, miner, cfg, WINDOW, 40.0)
-    path = tmp_path_factory.mktemp("model") / "tiny.json"
     cascade.save(path)
-    return path, cascade
+    return cascade
+
+
+TINY_DETECTOR = dict(scale_factor=1.1, min_size=20, max_size=30, min_neighbors=2, nms_iou=0.2)
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory):
+    path = tmp_path_factory.mktemp("model") / "tiny.json"
+    return path, train_tiny_model(path)
 
 
 def test_tiny_cascade_finds_its_targets(tiny_model):
     path, cascade = tiny_model
     assert len(cascade.stages) >= 2
-    det = Detector(DetectorConfig(model=str(path), scale_factor=1.1, min_size=20, max_size=30, min_neighbors=2,
-                                  nms_iou=0.2))
+    det = Detector(DetectorConfig(model=str(path), **TINY_DETECTOR))
     rng = np.random.default_rng(123)
     found = total = false = 0
     for _ in range(3):
