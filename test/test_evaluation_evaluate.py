@@ -146,3 +146,17 @@ def test_cli_writes_table_json_and_plots(tmp_path, capsys):
     for name in ("success_precision.png", "continuity.png", "timeline_mot.png"):
         assert (rep / name).stat().st_size > 1000
     assert ev.main([str(tmp_path / "missing.mcap")]) == 2
+
+
+def test_results_file_of_quadrilaterals_shorter_than_ground_truth(tmp_path):
+    gt = tmp_path / "groundtruth_rect.txt"
+    gt.write_text("1,1,10,10\n" * 5)
+    quads = tmp_path / "quads.txt"
+    quads.write_text("0,0,10,0,10,10,0,10\n5,0,15,0,15,10,5,10\n")   # TL, TR, BR, BL
+    r = ev.evaluate_files(quads, gt)["sot"]
+    np.testing.assert_allclose(r["iou"], [1.0, 1 / 3])
+    assert r["scored_frames"] == 2 and r["ground_truth_frames"] == 5
+    bad = tmp_path / "bad.txt"
+    bad.write_text("1,2,3\n")
+    with pytest.raises(ValueError, match="columns"):
+        ev.evaluate_files(bad, gt)

@@ -329,12 +329,14 @@ def _mot_tables_from_file(path: Path) -> dict:
 
 
 def evaluate_files(results: str | Path, gt: str | Path, config: EvaluateConfig | None = None) -> dict:
-    """Score a results text file (OTB ``x,y,w,h`` lines, or MOTChallenge rows) against a gt file or bag.
+    """Score a results text file against a gt file or bag: OTB ``x,y,w,h`` lines, quadrilateral lines
+    ``x1,y1,...,x4,y4`` (TL, TR, BR, BL; as ``sot_track --quads`` writes), or MOTChallenge rows.
 
     Frames are matched by order: line k of an OTB file, frame k of a MOTChallenge file, the k-th
-    ground-truth message of a bag.
+    ground-truth message of a bag. A single-target results file shorter than its ground truth is
+    scored on its own frames (``ground_truth_frames`` tells how many there were).
     """
-    from aircraft_docking_tracker.scenarios.datasets import read_results_boxes  # noqa: PLC0415
+    from aircraft_docking_tracker.scenarios.datasets import read_results_regions  # noqa: PLC0415
 
     cfg = validate(config or EvaluateConfig())
     results, gt = Path(results), Path(gt)
@@ -342,21 +344,26 @@ def evaluate_files(results: str | Path, gt: str | Path, config: EvaluateConfig |
     columns = len(first.replace(",", " ").split())
     if gt.suffix == ".mcap" or gt.is_dir():
         streams = read_streams(gt, (GROUND_TRUTH, GT_POLYGON))
-        key = GT_POLYGON if columns == 4 else GROUND_TRUTH
+        key = GT_POLYGON if columns in (4, 8) else GROUND_TRUTH
         if key not in streams:
-            raise EvaluationError(f"{gt}: no {key} topic for a {'single' if columns == 4 else 'multi'}-target results file")
-        convert = _quad if columns == 4 else _table
+            raise EvaluationError(f"{gt}: no {key} topic for a {'single' if key == GT_POLYGON else 'multi'}-target results file")
+        convert = _quad if key == GT_POLYGON else _table
         gt_frames = {k: convert(streams[key].values[s]) for k, s in enumerate(sorted(streams[key].values),
-                                                                             start=0 if columns == 4 else 1)}
+                                                                             start=0 if key == GT_POLYGON else 1)}
     else:
-        gt_frames = _sot_gt_from_file(gt) if columns == 4 else _mot_tables_from_file(gt)
-    if columns == 4:
-        pred = dict(enumerate(box_to_quad(read_results_boxes(results))))
-        return {"sot": score_sot(gt_frames, pred, cfg), "inputs": {"output": str(results), "ground_truth": str(gt)}}
-    if columns >= 6:
+        gt_frames = _sot_gt_from_file(gt) if columns in (4, 8) else _mot_tables_from_file(gt)
+    if columns in (4, 8):
+        pred = dict(enumerate(read_results_regions(results)))
+        # a results file shorter than the ground truth (a --max-frames run) is scored on its frames
+        scored = {k: q for k, q in gt_frames.items() if k < len(pred)}
+        result = score_sot(scored, pred, cfg)
+        result["ground_truth_frames"] = len(gt_frames)
+        return {"sot": result, "inputs": {"output": str(results), "ground_truth": str(gt)}}
+    if columns >= 6 and columns != 8:
         return {"mot": score_mot(gt_frames, _mot_tables_from_file(results), cfg),
                 "inputs": {"output": str(results), "ground_truth": str(gt)}}
-    raise EvaluationError(f"{results}: {columns} columns; OTB results have 4, MOTChallenge results at least 6")
+    raise EvaluationError(f"{results}: {columns} columns; OTB results have 4 (x,y,w,h), quadrilaterals 8, "
+                          "MOTChallenge results at least 6")
 
 
 # --- report ---------------------------------------------------------------------------------------
@@ -440,7 +447,7 @@ def main(argv=None) -> int:
     except (ValueError, OSError) as exc:
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
-    print(report.format_report(results))
+    print(report.format_report(results), flush=True)
     if args.report:
         folder = Path(args.report)
         report.write_json(folder / "report.json", results)

@@ -112,15 +112,16 @@ def timeline_plot(timelines: dict, path: str | Path, title: str = "") -> Path:
     plt = _pyplot()
     ids = sorted(timelines)
     fig, ax = plt.subplots(figsize=(10, max(2.5, 0.3 * len(ids) + 1)))
-    cmap = plt.get_cmap("tab20")
+    tab20 = plt.get_cmap("tab20")
+    colors = [tab20(i) for i in range(20) if i not in (14, 15)]          # no greys: grey means missed
     for row, gt_id in enumerate(ids):
         frames = np.array([f for f, _ in timelines[gt_id]])
         hyps = [h for _, h in timelines[gt_id]]
         missed = frames[[h is None for h in hyps]]
-        ax.scatter(missed, np.full(len(missed), row), marker="|", color="0.75", s=40)
+        ax.scatter(missed, np.full(len(missed), row), marker=".", color="0.7", s=12)
         for hyp in sorted({h for h in hyps if h is not None}):
             sel = frames[[h == hyp for h in hyps]]
-            ax.scatter(sel, np.full(len(sel), row), marker="|", color=cmap(int(hyp) % 20), s=40)
+            ax.scatter(sel, np.full(len(sel), row), marker="|", color=colors[int(hyp) % len(colors)], s=40)
     ax.set_yticks(range(len(ids)), [str(i) for i in ids])
     ax.set(xlabel="frame", ylabel="target", title=title or "Tracking timeline (colour = track id, grey = missed)")
     return _save(fig, path)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aircraft_docking_tracker.evaluation.sot_metrics import box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
@@ -61,12 +62,16 @@ def read_sot_boxes(path: str | Path) -> tuple[np.ndarray, str]:
     raise DatasetError(f"{path}: rows of {sorted(widths)} numbers; OTB has 4 (x,y,w,h), TLP 6 (frame,x,y,w,h,lost)")
 
 
-def read_results_boxes(path: str | Path) -> np.ndarray:
-    """A tracker's results file in the OTB layout (``x,y,w,h`` per frame, 0-based as we write them)."""
+def read_results_regions(path: str | Path) -> np.ndarray:
+    """A tracker's results file: ``x,y,w,h`` per line (OTB layout, 0-based as our tools write it)
+    or ``x1,y1,...,x4,y4`` quadrilaterals (TL, TR, BR, BL) -> ``(N, 4, 2)`` quadrilaterals."""
     rows = _rows(Path(path))
-    if not rows or {len(r) for r in rows} != {4}:
-        raise DatasetError(f"{path}: an OTB-style results file has 4 numbers per line")
-    return np.array(rows, np.float64)
+    widths = {len(r) for r in rows}
+    if widths == {4}:
+        return box_to_quad(np.array(rows, np.float64))
+    if widths == {8}:
+        return np.array(rows, np.float64).reshape(-1, 4, 2)
+    raise DatasetError(f"{path}: results need 4 (x,y,w,h) or 8 (quadrilateral) numbers per line, found {sorted(widths)}")
 
 
 def list_frames(folder: str | Path) -> list[Path]:
