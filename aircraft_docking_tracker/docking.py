@@ -1,0 +1,172 @@
+"""Start, loss and re-acquisition around the affine-group filter (the product's docking track). Pure.
+
+The seed (000 §3) starts its tracker by hand and never loses the aircraft; a stand camera running
+all day must settle what happens before the aircraft appears and when the track breaks:
+
+* **waiting** (state 2): no track yet. A start comes from an explicit box or quadrilateral
+  (``start``/``request_start``: the node's ``initial_box`` parameter or ``docking/init`` topic),
+  or from the best ``detections`` row of class ``detection_class`` scoring at least
+  ``min_detection_score``.
+* **tracking** (state 0): the filter runs every frame. When its score ``Ŝ_t`` stays below
+  ``lost_score`` for ``lost_after`` consecutive frames, the track is declared lost.
+* **lost** (state 1): the filter keeps running where it was (the aircraft may come back from behind
+  a vehicle) and the track is reported again after ``recover_after`` consecutive frames at or
+  above ``lost_score``; meanwhile a detection of the aircraft class restarts the filter on it
+  (re-acquisition), a new appearance model included.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import affine_group as ag
+from .config import ConfigError, param
+from .ispf import FilterConfig, make_filter
+
+TRACKING, LOST, WAITING = 0, 1, 2
+STATE_NAMES = {TRACKING: "tracking", LOST: "lost", WAITING: "waiting"}
+
+#: The ``docking/state`` row: the affine parameters of X̂_t (``affine_group.to_params``), the score
+#: Ŝ_t, the particles used this frame and the state code (0 tracking, 1 lost, 2 waiting).
+STATE_DTYPE = np.dtype([("cx", np.float32), ("cy", np.float32), ("scale", np.float32),
+                        ("aspect", np.float32), ("rotation", np.float32), ("skew", np.float32),
+                        ("score", np.float32), ("particles", np.int32), ("state", np.int32)])
+
+
+@dataclass
+class DockingConfig(FilterConfig):
+    """The filter's constants plus the track's start / loss / re-acquisition rules."""
+
+    initial_box: list = param([], "initial box x, y, w, h [px, top-left corner]; empty: wait for "
+                              "docking/init or a detection")
+    lost_score: float = param(0.55, "a frame whose best similarity Ŝ is below this counts as low",
+                              low=0.0, high=1.0)
+    lost_after: int = param(10, "consecutive low frames before the track is declared lost", low=1, high=10000)
+    recover_after: int = param(5, "consecutive good frames for a lost track to be reported again",
+                               low=1, high=10000)
+    detection_class: int = param(-1, "class_id of the aircraft in detections (-1: any class)",
+                                 low=-1, high=2**31 - 1)
+    min_detection_score: float = param(0.0, "smallest detection score that may start the track",
+                                       low=-1e9, high=1e9)
+
+    def validate(self) -> None:
+        """The cross-field check ``config.validate`` calls: initial_box is empty or a real box."""
+        box = self.initial_box
+        if len(box) not in (0, 4) or (len(box) == 4 and not (box[2] > 0 and box[3] > 0)):
+            raise ConfigError(f"initial_box must be empty or x, y, w, h with w, h > 0, got {list(box)}")
+
+
+@dataclass
+class DockingResult:
+    """One frame of the docking track: the state code and, unless waiting, the filter's output."""
+
+    state: int
+    matrix: np.ndarray | None = None
+    score: float = float("nan")
+    particles: int = 0
+    started: bool = False
+    particle_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)), repr=False)
+
+    @property
+    def quad(self) -> np.ndarray | None:
+        """The tracked quadrilateral (4, 2): TL, TR, BR, BL of the template, pixels."""
+        return None if self.matrix is None else ag.to_quad(self.matrix)
+
+    @property
+    def box(self) -> np.ndarray | None:
+        """Axis-aligned box x, y, w, h of the quadrilateral."""
+        return None if self.matrix is None else ag.to_box(self.matrix)
+
+    @property
+    def params(self) -> np.ndarray:
+        """cx, cy, scale, aspect, rotation, skew (NaN while waiting)."""
+        return np.full(6, np.nan) if self.matrix is None else ag.to_params(self.matrix)
+
+
+def best_detection(table: np.ndarray | None, class_id: int = -1, min_score: float = -np.inf) -> np.ndarray | None:
+    """Box (x, y, w, h) of the highest-scoring valid row of ``class_id`` (-1: any), or None."""
+    if table is None or len(table) == 0:
+        return None
+    boxes = np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(float)
+    scores = np.asarray(table["score"], dtype=float)
+    ok = np.isfinite(boxes).all(axis=1) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0) & (scores >= min_score)
+    if class_id >= 0:
+        ok &= np.asarray(table["class_id"]) == class_id
+    if not ok.any():
+        return None
+    return boxes[np.flatnonzero(ok)[np.argmax(scores[ok])]]
+
+
+class DockingTracker:
+    """The docking track's state machine (see module docstring) around ISPF or the plain PF."""
+
+    def __init__(self, config: DockingConfig | None = None):
+        self.config = config or DockingConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to waiting; a pending start request survives only if made after the reset."""
+        self.filter = make_filter(self.config)
+        self.state = WAITING
+        self._pending: np.ndarray | None = None
+        self._low = self._good = 0
+        if len(self.config.initial_box) == 4:
+            self.request_start(self.config.initial_box)
+
+    def configure(self, config: DockingConfig) -> None:
+        """New constants: loss rules apply at once; filter constants at the next (re)start."""
+        self.config = config
+
+    def request_start(self, where) -> None:
+        """Start on the next frame at a box (x, y, w, h), a quadrilateral (4, 2) or a 3x3 state."""
+        self._pending = _as_state(where)
+
+    def start(self, frame: np.ndarray, where) -> DockingResult:
+        """Start the filter on ``frame`` at ``where`` (box, quadrilateral or state) now."""
+        state = _as_state(where)
+        self.filter = make_filter(self.config)
+        self.filter.start(frame, state)
+        self.state, self._low, self._good, self._pending = TRACKING, 0, 0, None
+        return DockingResult(TRACKING, state.copy(), 1.0, 0, True, state[None].copy())
+
+    def step(self, frame: np.ndarray, detections: np.ndarray | None = None) -> DockingResult:
+        """One frame: a pending start, else the filter, then the loss / re-acquisition rules."""
+        if self._pending is not None:
+            return self.start(frame, self._pending)
+        if self.state != TRACKING:
+            box = best_detection(detections, self.config.detection_class, self.config.min_detection_score)
+            if box is not None:
+                return self.start(frame, box)
+        if self.state == WAITING:
+            return DockingResult(WAITING)
+        r = self.filter.step(frame)
+        low = r.score < self.config.lost_score
+        self._low = self._low + 1 if low else 0
+        self._good = 0 if low else self._good + 1
+        if self.state == TRACKING and self._low >= self.config.lost_after:
+            self.state = LOST
+        elif self.state == LOST and self._good >= self.config.recover_after:
+            self.state = TRACKING
+        return DockingResult(self.state, r.state, r.score, r.particles, False, r.particle_states)
+
+
+def _as_state(where) -> np.ndarray:
+    arr = np.asarray(where, dtype=float)
+    if arr.shape == (4,):
+        return ag.from_box(*arr)
+    if arr.shape == (4, 2):
+        return ag.from_quad(arr)
+    if arr.shape == (3, 3):
+        ag.to_params(arr)                       # raises AffineError when not a valid state
+        return arr.copy()
+    raise ag.AffineError(f"a start needs a box (4,), a quadrilateral (4, 2) or a 3x3 state, got {arr.shape}")
+
+
+def state_row(result: DockingResult) -> np.ndarray:
+    """The one-row ``STATE_DTYPE`` table of a frame's result (NaN parameters while waiting)."""
+    row = np.zeros(1, STATE_DTYPE)
+    for name, value in zip(("cx", "cy", "scale", "aspect", "rotation", "skew"), result.params):
+        row[name] = value
+    row["score"], row["particles"], row["state"] = result.score, result.particles, result.state
+    return row

@@ -1,0 +1,134 @@
+"""ISPF and the plain PF lock onto a synthetic textured target that moves, grows and turns."""
+import cv2
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker.appearance import (AppearanceConfig, AppearanceError, IncrementalSubspace,
+                                                 ObservationModel, normalize)
+from aircraft_docking_tracker.evaluation.sot_metrics import polygon_iou
+from aircraft_docking_tracker.ispf import ISPF, AffineParticleFilter, FilterConfig, FrameError, make_filter
+
+
+def textured(shape, rng, blur=2.0):
+    noise = rng.normal(size=shape).astype(np.float32)
+    img = cv2.GaussianBlur(noise, (0, 0), blur)
+    return cv2.normalize(img, None, 20, 235, cv2.NORM_MINMAX)
+
+
+def moving_target_scene(frames=40, size=(320, 240), seed=0, visible=lambda i: True):
+    """Grey frames with a textured 48x32 target whose true state moves, grows x1.5 and turns 20 deg.
+
+    Yields (frame uint8, true 3x3 state); ``visible(i)`` False hides the target in frame i.
+    """
+    rng = np.random.default_rng(seed)
+    w, h = size
+    background = textured((h, w), rng, 3.0)
+    sprite = textured((64, 96), rng, 4.0)                 # the target's texture, 96 x 64 sprite pixels
+    for i in range(frames):
+        t = i / max(frames - 1, 1)
+        X = ag.from_params([80 + 140 * t, 90 + 50 * t, np.sqrt(48 * 32) * (1 + 0.5 * t), 1.5,
+                            np.deg2rad(20) * t, 0.0])
+        frame = background.copy()
+        if visible(i):
+            # sprite pixel (c, r) -> template (u, v) = ((c + .5)/96 - .5, (r + .5)/64 - .5) -> image
+            to_template = np.array([[1 / 96, 0, 0.5 / 96 - 0.5], [0, 1 / 64, 0.5 / 64 - 0.5], [0, 0, 1]])
+            M = (X @ to_template)[:2] - np.array([[0, 0, 0.5], [0, 0, 0.5]])
+            warped = cv2.warpAffine(sprite, M, (w, h), flags=cv2.INTER_LINEAR, borderValue=-1)
+            inside = cv2.warpAffine(np.ones_like(sprite), M, (w, h), flags=cv2.INTER_LINEAR)
+            frame = np.where(inside > 0.5, warped, frame)
+        frame = frame + rng.normal(0, 3, frame.shape)
+        yield np.clip(frame, 0, 255).astype(np.uint8), X
+
+
+def run_filter(config, frames=40):
+    scene = list(moving_target_scene(frames))
+    flt = make_filter(config)
+    flt.start(scene[0][0], scene[0][1])
+    ious, particles = [], []
+    for frame, truth in scene[1:]:
+        r = flt.step(frame)
+        ious.append(polygon_iou(ag.to_quad(r.state)[None], ag.to_quad(truth)[None])[0])
+        particles.append(r.particles)
+    return np.array(ious), np.array(particles), flt
+
+
+def test_ispf_locks_onto_a_moving_growing_turning_target():
+    ious, particles, flt = run_filter(FilterConfig(method="ispf", seed=1))
+    assert ious.mean() > 0.75, ious.round(2)
+    assert ious[-10:].min() > 0.6, ious.round(2)
+    assert particles.min() >= 20 and particles.max() <= 300
+    cx, cy, scale, aspect, rotation, _ = ag.to_params(flt.estimate)
+    assert abs(scale / (np.sqrt(48 * 32) * 1.5) - 1) < 0.15
+    assert abs(np.rad2deg(rotation) - 20) < 8
+
+
+def test_plain_pf_with_the_same_model_also_tracks():
+    ious, particles, _ = run_filter(FilterConfig(method="pf", pf_particles=300, seed=1))
+    assert (particles == 300).all()
+    assert ious.mean() > 0.6, ious.round(2)
+
+
+def test_ispf_uses_fewer_particles_than_its_maximum_when_the_target_is_easy():
+    _, particles, _ = run_filter(FilterConfig(method="ispf", seed=2, n_total=600))
+    assert particles.mean() < 0.5 * 600
+
+
+def test_isp_and_pf_share_one_transition_and_update():
+    assert issubclass(ISPF, AffineParticleFilter)
+    for name in ("_transition", "_finish", "_resample", "_observe", "start"):
+        assert name not in ISPF.__dict__
+
+
+def test_self_tuning_moves_particles_toward_the_target():
+    scene = moving_target_scene(3)
+    frame0, X0 = next(scene)
+    flt = ISPF(FilterConfig(seed=0))
+    flt.start(frame0, X0)
+    frame1, X1 = next(scene)
+    flt._load(frame1, X0)
+    offsets = np.zeros((30, 6))
+    offsets[:, 4:] = np.random.default_rng(0).normal(0, 0.08, (30, 2))
+    start = X1 @ ag.exp_coords(offsets)
+    tuned, scores, _ = flt.self_tune(start)
+    before = np.linalg.norm(ag.log_coords(ag.inverse(X1) @ start)[:, 4:], axis=1)
+    after = np.linalg.norm(ag.log_coords(ag.inverse(X1) @ tuned)[:, 4:], axis=1)
+    assert np.median(after) < 0.6 * np.median(before)
+    assert (scores >= flt._score(start)[0] - 1e-6).all()         # tuning never lowers Sim
+
+
+def test_bad_frames_are_refused():
+    flt = make_filter(FilterConfig())
+    with pytest.raises(FrameError):
+        flt.step(np.zeros((10, 10), np.uint8))                   # before start
+    frame, X = next(moving_target_scene(1))
+    flt.start(frame, X)
+    with pytest.raises(FrameError):
+        flt.step(np.zeros((0, 5), np.uint8))
+    with pytest.raises(FrameError):
+        flt.step(np.zeros((4, 4, 3, 2), np.uint8))
+
+
+def test_incremental_subspace_learns_a_low_rank_set():
+    rng = np.random.default_rng(0)
+    basis = np.linalg.qr(rng.normal(size=(100, 3)))[0]
+    data = rng.normal(size=(60, 3)) @ basis.T * 5 + 2.0
+    sub = IncrementalSubspace(100, 8, 1.0)
+    for k in range(0, 60, 5):
+        sub.update(data[k:k + 5])
+    assert np.allclose(sub.mean, data.mean(axis=0), atol=1e-4)
+    assert np.abs(sub.residual(data)).max() < 1e-3                 # the 3-d set is explained
+    assert np.abs(sub.residual(rng.normal(size=(5, 100)) * 5)).mean() > 1.0
+
+
+def test_similarity_is_high_for_the_model_and_low_for_other_texture():
+    rng = np.random.default_rng(0)
+    model = ObservationModel(AppearanceConfig())
+    patch = textured((32, 32), rng)
+    model.start(patch[None])
+    other = textured((32, 32), rng)
+    sims = model.similarity(np.stack([patch, patch * 0.5 + 40, other]))
+    assert sims[0] > 0.99 and sims[1] > 0.99 and sims[2] < 0.6     # brightness/contrast invariant
+    with pytest.raises(AppearanceError):
+        model.similarity(np.zeros((1, 16, 16)))
+    assert np.allclose(normalize(patch[None]).std(), 1, atol=1e-2)

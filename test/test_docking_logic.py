@@ -1,0 +1,93 @@
+"""Start, loss and re-acquisition of the docking track (aircraft_docking_tracker.docking)."""
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker.config import ConfigError, from_mapping
+from aircraft_docking_tracker.docking import (LOST, STATE_DTYPE, TRACKING, WAITING, DockingConfig,
+                                              DockingResult, DockingTracker, best_detection, state_row)
+from aircraft_docking_tracker.ispf import FrameResult
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE
+from test_docking_filter import moving_target_scene
+
+
+def detections(*rows):
+    return np.array(list(rows), dtype=DETECTION_DTYPE)
+
+
+def test_best_detection_picks_the_highest_scoring_row_of_the_class():
+    table = detections((0, 0, 10, 10, 0.9, 1), (5, 5, 20, 20, 0.8, 3), (1, 1, 30, 30, 0.95, 3),
+                       (2, 2, np.nan, 5, 0.99, 3), (3, 3, 0, 5, 0.99, 3))
+    assert np.allclose(best_detection(table, 3), [1, 1, 30, 30])
+    assert np.allclose(best_detection(table, -1), [1, 1, 30, 30])
+    assert np.allclose(best_detection(table, 1), [0, 0, 10, 10])
+    assert best_detection(table, 7) is None
+    assert best_detection(table, 3, min_score=0.96) is None
+    assert best_detection(detections(), 3) is None and best_detection(None) is None
+
+
+def test_waits_then_starts_from_a_detection_of_the_aircraft_class():
+    scene = list(moving_target_scene(30))
+    tracker = DockingTracker(DockingConfig(detection_class=2, seed=0))
+    r = tracker.step(scene[0][0])
+    assert r.state == WAITING and r.quad is None and np.isnan(r.params).all()
+    truth_box = ag.to_box(scene[1][1])
+    r = tracker.step(scene[1][0], detections((*truth_box, 0.9, 5)))           # wrong class: ignored
+    assert r.state == WAITING
+    r = tracker.step(scene[2][0], detections((*ag.to_box(scene[2][1]), 0.9, 2)))
+    assert r.state == TRACKING and r.started
+    for frame, truth in scene[3:]:
+        r = tracker.step(frame, detections((0, 0, 5, 5, 1.0, 2)))             # ignored while tracking
+    assert r.state == TRACKING
+    assert np.linalg.norm(r.params[:2] - ag.to_params(scene[-1][1])[:2]) < 10
+
+
+def test_initial_box_parameter_and_request_start():
+    frame, truth = next(moving_target_scene(1))
+    box = ag.to_box(truth)
+    r = DockingTracker(DockingConfig(initial_box=list(box))).step(frame)
+    assert r.state == TRACKING and np.allclose(r.box, box)
+    tracker = DockingTracker()
+    tracker.request_start(ag.to_quad(truth))
+    assert np.allclose(tracker.step(frame).matrix, truth)
+    with pytest.raises(ValueError):
+        tracker.request_start([1, 2, 3])
+    with pytest.raises(ConfigError):
+        from_mapping(DockingConfig, {"initial_box": [0, 0, 0, 5]})
+
+
+def test_the_track_is_lost_when_the_aircraft_vanishes_and_reacquired_from_detections():
+    hide_from = 12
+    scene = list(moving_target_scene(40, visible=lambda i: i < hide_from or i >= 30))
+    cfg = DockingConfig(lost_after=5, lost_score=0.7, seed=0)
+    tracker = DockingTracker(cfg)
+    tracker.start(scene[0][0], scene[0][1])
+    states = [tracker.step(frame).state for frame, _ in scene[1:30]]
+    assert all(s == TRACKING for s in states[:hide_from - 1])
+    assert states[-1] == LOST
+    first_lost = states.index(LOST) + 1
+    assert hide_from + cfg.lost_after - 1 <= first_lost <= hide_from + cfg.lost_after + 3
+    frame, truth = scene[30]
+    r = tracker.step(frame, detections((*ag.to_box(truth), 0.8, 0)))
+    assert r.state == TRACKING and r.started
+    r = tracker.step(scene[31][0])
+    assert r.state == TRACKING and r.score > cfg.lost_score
+
+
+def test_a_lost_track_recovers_after_enough_good_frames():
+    tracker = DockingTracker(DockingConfig(lost_after=3, recover_after=2, lost_score=0.5))
+    frame, truth = next(moving_target_scene(1))
+    tracker.start(frame, truth)
+    scores = iter([0.9, 0.4, 0.4, 0.4, 0.4, 0.9, 0.9, 0.3])
+    tracker.filter.step = lambda f: FrameResult(truth, next(scores), 20, False, truth[None])
+    states = [tracker.step(frame).state for _ in range(8)]
+    assert states == [TRACKING, TRACKING, TRACKING, LOST, LOST, LOST, TRACKING, TRACKING]
+
+
+def test_state_row():
+    row = state_row(DockingResult(TRACKING, ag.from_box(0, 0, 40, 10), 0.8, 33))
+    assert row.dtype == STATE_DTYPE and len(row) == 1
+    assert np.allclose([row["cx"][0], row["cy"][0], row["scale"][0], row["aspect"][0]], [20, 5, 20, 4])
+    assert row["particles"][0] == 33 and row["state"][0] == TRACKING
+    waiting = state_row(DockingResult(WAITING))
+    assert np.isnan(waiting["cx"][0]) and waiting["state"][0] == WAITING
