@@ -131,3 +131,16 @@ def test_convert_detect_tiles(tmp_path):
     assert summary["kind"] == "detect" and summary["frames"] == 3 and summary["boxes"] > 0
     gt = [cloud_to_table(msg) for _, msg, _ in BagReader(tmp_path / "tiles.mcap").ros_messages(["ground_truth"])]
     assert "id" not in gt[0].dtype.names and (gt[0]["w"] > 10).all()
+
+
+def test_perfect_tracker_on_a_docking_bag_scores_full_marks(tmp_path):
+    out = tmp_path / "d.mcap"
+    assert ms.main(["--kind", "docking", "--seed", "6", "--out", str(out), "--frames", "6", "--width", "320",
+                    "--height", "240", "--quiet"]) == 0
+    frames = list(DockingScene(DockingSceneConfig(frames=6, width=320, height=240), seed=6).frames())
+    quads = tmp_path / "quads.txt"
+    quads.write_text("".join(",".join(f"{v:.4f}" for v in f.quad.ravel()) + "\n" for f in frames))
+    r = ev.evaluate_files(quads, out)["sot"]
+    assert r["success_auc"] == pytest.approx(20 / 21)            # IoU 1 passes every threshold but 1.0
+    assert r["precision"] == 1.0 and r["lost_frames"] == 0
+    assert r["nose_error_median"] < 0.01

@@ -340,23 +340,28 @@ def evaluate_files(results: str | Path, gt: str | Path, config: EvaluateConfig |
 
     cfg = validate(config or EvaluateConfig())
     results, gt = Path(results), Path(gt)
+    stand = gt_nose = None
     first = next((ln for ln in results.read_text().splitlines() if ln.strip()), "")
     columns = len(first.replace(",", " ").split())
     if gt.suffix == ".mcap" or gt.is_dir():
-        streams = read_streams(gt, (GROUND_TRUTH, GT_POLYGON))
+        streams = read_streams(gt, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND))
         key = GT_POLYGON if columns in (4, 8) else GROUND_TRUTH
         if key not in streams:
             raise EvaluationError(f"{gt}: no {key} topic for a {'single' if key == GT_POLYGON else 'multi'}-target results file")
         convert = _quad if key == GT_POLYGON else _table
-        gt_frames = {k: convert(streams[key].values[s]) for k, s in enumerate(sorted(streams[key].values),
-                                                                             start=0 if key == GT_POLYGON else 1)}
+        stamps = sorted(streams[key].values)
+        gt_frames = {k: convert(streams[key].values[s]) for k, s in enumerate(stamps, start=0 if key == GT_POLYGON else 1)}
+        if GT_STAND in streams and GT_NOSE in streams:
+            stand = json.loads(streams[GT_STAND].values[0])
+            noses = streams[GT_NOSE].values
+            gt_nose = {k: np.array([noses[s].point.x, noses[s].point.y]) for k, s in enumerate(stamps) if s in noses}
     else:
         gt_frames = _sot_gt_from_file(gt) if columns in (4, 8) else _mot_tables_from_file(gt)
     if columns in (4, 8):
         pred = dict(enumerate(read_results_regions(results)))
         # a results file shorter than the ground truth (a --max-frames run) is scored on its frames
         scored = {k: q for k, q in gt_frames.items() if k < len(pred)}
-        result = score_sot(scored, pred, cfg)
+        result = score_sot(scored, pred, cfg, stand, gt_nose)
         result["ground_truth_frames"] = len(gt_frames)
         return {"sot": result, "inputs": {"output": str(results), "ground_truth": str(gt)}}
     if columns >= 6 and columns != 8:
