@@ -209,24 +209,24 @@ class LevelScan:
         self.m_lbp = np.max([block_max[dy // s:dy // s + r, dx // s:dx // s + c] for dy, dx in BLOCK_OFFSETS],
                             axis=0).reshape(-1).astype(np.int64)
 
-    # --- contour: potential maps by cumulative sums, per-window maximum by sliding max (eq. 4)
+    # --- contour: potential maps by box sums, per-window maximum by sliding max (eq. 4)
     def _contour(self, gray_c: np.ndarray, edge_threshold: float) -> None:
         n, s2 = CONTOUR_SIZE, 2 * self.stride
-        b = contour_image(gray_c, edge_threshold).astype(np.int32)
+        b = contour_image(gray_c, edge_threshold).astype(np.float32)  # integer sums < 2^24: exact
         b[0, :] = b[-1, :] = 0
         b[:, 0] = b[:, -1] = 0
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
         x0 = 2 + s2 * np.arange(self.cols)
-        ys = np.arange(b.shape[0])[:, None]
-        xs = np.arange(b.shape[1])[None, :]
-        c0 = np.vstack([np.zeros((1, b.shape[1]), np.int32), np.cumsum(b, axis=0, dtype=np.int32)])
-        c1 = np.vstack([np.zeros((1, b.shape[1]), np.int32), np.cumsum(b * ys, axis=0, dtype=np.int32)])
-        # P_x map: rows = window top rows y0, columns = every contour-level column X
-        self.px = ((n + y0)[:, None] * (c0[y0 + n] - c0[y0]) - (c1[y0 + n] - c1[y0])).astype(np.float32)
-        r0 = np.hstack([np.zeros((b.shape[0], 1), np.int32), np.cumsum(b, axis=1, dtype=np.int32)])
-        r1 = np.hstack([np.zeros((b.shape[0], 1), np.int32), np.cumsum(b * xs, axis=1, dtype=np.int32)])
-        # P_y map: rows = every contour-level row Y, columns = window left columns x0
-        self.py = ((r1[:, x0 + n] - r1[:, x0]) - (x0 - 1)[None, :] * (r0[:, x0 + n] - r0[:, x0])).astype(np.float32)
+        ys = np.arange(b.shape[0], dtype=np.float32)[:, None]
+        xs = np.arange(b.shape[1], dtype=np.float32)[None, :]
+
+        def run_sum(image, ksize):  # sum over the n pixels below / right of each pixel
+            return cv2.boxFilter(image, -1, ksize, anchor=(0, 0), normalize=False, borderType=cv2.BORDER_CONSTANT)
+
+        # P_x(j) = sum_i b(y0+i, X)(n - i) = (n + y0) sum_Y b - sum_Y Y b, rows y0, every column X
+        self.px = (n + y0)[:, None].astype(np.float32) * run_sum(b, (1, n))[y0] - run_sum(b * ys, (1, n))[y0]
+        # P_y(i) = sum_j b(Y, x0+j)(j + 1) = sum_X X b - (x0 - 1) sum_X b, every row Y, columns x0
+        self.py = run_sum(b * xs, (n, 1))[:, x0] - (x0 - 1)[None, :].astype(np.float32) * run_sum(b, (n, 1))[:, x0]
         run_x = cv2.dilate(self.px, np.ones((1, n), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         run_y = cv2.dilate(self.py, np.ones((n, 1), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
