@@ -106,13 +106,18 @@ class DockingTracker:
         self.reset()
 
     def reset(self) -> None:
-        """Back to waiting; a pending start request survives only if made after the reset."""
+        """Back to waiting (a looped bag, a time jump); ``initial_box``, if set, starts it again."""
         self.filter = make_filter(self.config)
         self.state = WAITING
         self._pending: np.ndarray | None = None
         self._low = self._good = 0
         if len(self.config.initial_box) == 4:
             self.request_start(self.config.initial_box)
+
+    def stop(self) -> None:
+        """Back to waiting with no start pending (not even ``initial_box``): an operator's stop."""
+        self.reset()
+        self._pending = None
 
     def configure(self, config: DockingConfig) -> None:
         """New constants: loss rules apply at once; filter constants at the next (re)start."""

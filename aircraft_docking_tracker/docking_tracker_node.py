@@ -1,0 +1,191 @@
+"""``docking_tracker_node``: images in, the docking aircraft's affine quadrilateral out (seed 000 §2
+via :mod:`aircraft_docking_tracker.docking`, :mod:`~aircraft_docking_tracker.ispf`).
+
+Topics (relative names):
+
+* in ``image`` (``sensor_msgs/Image``, any encoding; ``CompressedImage`` with ``node.compressed``),
+  sensor-data QoS, newest frame kept, skipped frames counted; tracked in grey;
+* in ``detections`` (``PointCloud2``, ``DETECTION_DTYPE``): while waiting or lost, the best row of
+  class ``detection_class`` (re)starts the track; used when its stamp is within
+  ``node.detection_max_age`` of the image's;
+* in ``docking/init`` (``geometry_msgs/PolygonStamped``): a one-shot start: 4 points (TL, TR, BR,
+  BL quadrilateral) or 2 points (box corners TL, BR); an empty polygon stops the track (waiting);
+* out ``docking/polygon`` (``PolygonStamped``): the tracked quadrilateral, 4 points in pixels, TL,
+  TR, BR, BL of the template; **empty while waiting or lost**;
+* out ``docking/state`` (``PointCloud2``, one ``docking.STATE_DTYPE`` row: cx, cy, scale, aspect,
+  rotation, skew, score, particles, state 0 tracking / 1 lost / 2 waiting);
+* out ``docking/markers`` (``MarkerArray``: the quadrilateral, green tracking / red lost, and a
+  label);
+* out ``docking/image`` (bgr8, the quadrilateral and the particles drawn, as the seed's Figs. 2-3),
+  only with ``node.annotate_image``.
+
+Every output carries the input image's header. Parameters: the :class:`DockingConfig` fields (the
+filter's constants, ``initial_box``, loss and re-acquisition rules) plus ``node.*``. Filter
+constants set at runtime apply at the next (re)start; loss rules apply at once.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bag import stamp_to_ns
+from .config import param
+from .docking import LOST, STATE_NAMES, TRACKING, WAITING, DockingConfig, DockingResult, DockingTracker, state_row
+from .node_base import PerceptionNode, run_node
+from .object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
+from .processing import MessageProcessor, ProcessorSpec, Rejected
+
+NODE_NAME = "docking_tracker"
+NODE_PREFIX = "node."
+COLORS = {TRACKING: (0.1, 1.0, 0.2), LOST: (1.0, 0.2, 0.1)}
+
+
+@dataclass
+class DockingNodeConfig:
+    """Message handling around the docking tracker core (topics are fixed at start-up)."""
+
+    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image")
+    detection_max_age: float = param(0.5, "detections older or newer than this [s] than the image are "
+                                     "not used for (re)acquisition", low=0.0, high=3600.0)
+    annotate_image: bool = param(False, "publish docking/image (bgr8, quadrilateral and particles drawn)")
+    max_drawn_particles: int = param(300, "particles drawn on docking/image at most", low=0, high=100000)
+
+
+def draw_docking(bgr: np.ndarray, result: DockingResult, max_particles: int) -> np.ndarray:
+    """The image with the particles' centres (white dots) and the tracked quadrilateral."""
+    import cv2  # noqa: PLC0415
+
+    out = np.ascontiguousarray(bgr).copy()
+    if result.matrix is None:
+        cv2.putText(out, "waiting", (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 200, 255), 2)
+        return out
+    for cx, cy in result.particle_states[:max_particles, :2, 2]:
+        if np.isfinite(cx) and np.isfinite(cy):
+            cv2.circle(out, (int(round(cx)), int(round(cy))), 1, (255, 255, 255), -1)
+    r, g, b = COLORS[result.state]
+    color = (int(255 * b), int(255 * g), int(255 * r))
+    cv2.polylines(out, [np.round(result.quad).astype(np.int32)], True, color, 2, cv2.LINE_AA)
+    cv2.putText(out, f"{STATE_NAMES[result.state]} S={result.score:.2f} n={result.particles}", (8, 20),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.6, color, 2)
+    return out
+
+
+class DockingProcessor(MessageProcessor):
+    """Message conversion around :class:`DockingTracker` (live node and offline runner alike)."""
+
+    def __init__(self, config: DockingConfig | None = None, node: DockingNodeConfig | None = None):
+        self.tracker = DockingTracker(config or DockingConfig())
+        self.node = node or DockingNodeConfig()
+        image_type = "sensor_msgs/msg/CompressedImage" if self.node.compressed else "sensor_msgs/msg/Image"
+        self.inputs = {"image": image_type, "detections": "sensor_msgs/msg/PointCloud2",
+                       "docking/init": "geometry_msgs/msg/PolygonStamped"}
+        self.outputs = {"docking/polygon": "geometry_msgs/msg/PolygonStamped",
+                        "docking/state": "sensor_msgs/msg/PointCloud2",
+                        "docking/markers": "visualization_msgs/msg/MarkerArray"}
+        if self.node.annotate_image:
+            self.outputs["docking/image"] = "sensor_msgs/msg/Image"
+        self.latest_only = frozenset({"image"})
+        self._detections: tuple[int, np.ndarray] | None = None
+        self.last: DockingResult = DockingResult(WAITING)
+        self.starts = 0
+
+    def process(self, topic, msg):
+        if topic == "detections":
+            self._detections = (stamp_to_ns(msg.header.stamp), cloud_to_table(msg, DETECTION_DTYPE))
+            return []
+        if topic == "docking/init":
+            self._init(msg)
+            return []
+        return self._image(msg)
+
+    def _init(self, msg) -> None:
+        points = np.array([[p.x, p.y] for p in msg.polygon.points], dtype=float).reshape(-1, 2)
+        if len(points) == 0:
+            self.tracker.stop()                    # an empty polygon: stop, wait for a new start
+            return
+        if len(points) == 2:
+            (x0, y0), (x1, y1) = points
+            points = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+        if len(points) != 4:
+            raise Rejected(f"docking/init needs 4 points (quadrilateral) or 2 (box corners), got {len(points)}")
+        self.tracker.request_start(points)
+
+    def _image(self, msg):
+        from .images import to_bgr8, to_mono8  # noqa: PLC0415
+        from .markers import delete_all, polygon_marker, text_marker  # noqa: PLC0415
+        from .scenarios.messages import quad_to_polygon  # noqa: PLC0415
+        from visualization_msgs.msg import MarkerArray  # noqa: PLC0415
+
+        grey = to_mono8(msg)
+        result = self.tracker.step(grey, self._fresh_detections(stamp_to_ns(msg.header.stamp)))
+        self.last = result
+        self.starts += int(result.started)
+        shown = result.quad if result.state == TRACKING else np.full((4, 2), np.nan)
+        markers = MarkerArray()
+        markers.markers.append(delete_all(msg.header, "docking"))
+        if result.matrix is not None:
+            color = COLORS[result.state]
+            quad = result.quad
+            markers.markers.append(polygon_marker(msg.header, "docking", 0, quad, color))
+            markers.markers.append(text_marker(msg.header, "docking", 1, float(quad[0, 0]), float(quad[0, 1]) - 4.0,
+                                               f"{STATE_NAMES[result.state]} {result.score:.2f}", color))
+        out = [("docking/polygon", quad_to_polygon(shown, msg.header)),
+               ("docking/state", table_to_cloud(state_row(result), msg.header)),
+               ("docking/markers", markers)]
+        if self.node.annotate_image:
+            from .images import numpy_to_image  # noqa: PLC0415
+
+            drawn = draw_docking(to_bgr8(msg), result, self.node.max_drawn_particles)
+            out.append(("docking/image", numpy_to_image(drawn, "bgr8", msg.header)))
+        return out
+
+    def _fresh_detections(self, stamp_ns: int) -> np.ndarray | None:
+        if self._detections is None:
+            return None
+        det_stamp, table = self._detections
+        if abs(det_stamp - stamp_ns) > self.node.detection_max_age * 1e9:
+            return None
+        return table
+
+    def configure(self, config: DockingConfig) -> None:
+        self.tracker.configure(config)
+
+    def reset(self) -> None:
+        self.tracker.reset()
+        self._detections = None
+        self.last = DockingResult(WAITING)
+
+    def status(self) -> dict:
+        return {"docking state": STATE_NAMES[self.last.state], "score": f"{self.last.score:.3f}",
+                "particles last frame": self.last.particles, "track starts": self.starts,
+                "method": self.tracker.config.method}
+
+
+def build(configs: dict) -> DockingProcessor:
+    return DockingProcessor(configs[""], configs[NODE_PREFIX])
+
+
+SPEC = ProcessorSpec(NODE_NAME, {"": DockingConfig, NODE_PREFIX: DockingNodeConfig}, build)
+
+
+class DockingTrackerNode(PerceptionNode):
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        config = self.declare_config(DockingConfig)
+        node = self.declare_config(DockingNodeConfig, prefix=NODE_PREFIX)
+        self.attach_processor(DockingProcessor(config, node))
+
+    def on_config_changed(self, cfg) -> None:
+        if isinstance(cfg, DockingConfig):
+            self.processor.configure(cfg)
+        else:  # detection age and drawing apply at once; topics and compression at restart
+            self.processor.node = cfg
+
+
+def main(args=None):
+    run_node(DockingTrackerNode, args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,70 @@
+"""sot_track over a real OTB folder (skipped without the data), a video and a bag."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker import sot_track
+from aircraft_docking_tracker.bag import BagWriter
+from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.images import numpy_to_image
+from aircraft_docking_tracker.scenarios.datasets import read_sot_boxes
+from aircraft_docking_tracker.scenarios.messages import header, quad_to_polygon
+
+from conftest import require_data
+from test_docking_filter import moving_target_scene
+
+
+def test_sot_track_on_the_first_frames_of_car4(tmp_path, capsys):
+    folder = require_data("sot/Car4")
+    out, quads = tmp_path / "car4.txt", tmp_path / "car4_quads.txt"
+    assert sot_track.main([str(folder), "--out", str(out), "--quads", str(quads), "--max-frames", "40",
+                           "--no-progress"]) == 0
+    boxes = np.loadtxt(out, delimiter=",")
+    gt = read_sot_boxes(folder / "groundtruth_rect.txt")[0][:40]
+    assert boxes.shape == (40, 4) and np.loadtxt(quads, delimiter=",").shape == (40, 8)
+    assert np.allclose(boxes[0], gt[0])
+    assert box_iou(boxes, gt).mean() > 0.6
+    assert "success AUC" in capsys.readouterr().out
+
+
+def test_sot_track_pf_on_a_video_with_an_init_box(tmp_path):
+    scene = list(moving_target_scene(40))[:15]
+    video = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (320, 240))
+    for frame, _ in scene:
+        writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
+    writer.release()
+    init = ",".join(f"{v:.1f}" for v in ag.to_box(scene[0][1]))
+    out = tmp_path / "r.txt"
+    assert sot_track.main([str(video), "--init", init, "--method", "pf", "--pf-particles", "200",
+                           "--out", str(out), "--no-progress"]) == 0
+    boxes = np.loadtxt(out, delimiter=",")
+    truth = np.array([ag.to_box(X) for _, X in scene])
+    assert len(boxes) == 15 and box_iou(boxes, truth).mean() > 0.6
+
+
+def test_sot_track_on_a_bag_takes_the_first_ground_truth_polygon(tmp_path, capsys):
+    scene = list(moving_target_scene(40))[:10]
+    bag = tmp_path / "scene.mcap"
+    with BagWriter(bag) as writer:
+        for k, (frame, X) in enumerate(scene):
+            hdr = header(int(1e9 + k * 1e8))
+            writer.write("/image", numpy_to_image(frame, "mono8", hdr), int(1e9 + k * 1e8))
+            writer.write("/ground_truth/polygon", quad_to_polygon(ag.to_quad(X), hdr), int(1e9 + k * 1e8))
+    out = tmp_path / "r.txt"
+    assert sot_track.main([str(bag), "--out", str(out), "--no-progress"]) == 0
+    assert len(np.loadtxt(out, delimiter=",")) == 10
+    assert "success AUC" in capsys.readouterr().out
+
+
+def test_sot_track_refuses_bad_inputs(tmp_path, capsys):
+    assert sot_track.main([str(tmp_path / "nothing.txt"), "--init", "1,2,3,4", "--no-progress"]) == 2
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "0001.png"), np.zeros((20, 20), np.uint8))
+    assert sot_track.main([str(folder), "--no-progress"]) == 2                   # no init, no ground truth
+    assert sot_track.main([str(folder), "--init", "1,2,3", "--no-progress"]) == 2
+    assert sot_track.main([str(folder), "--init", "1,2,3,4", "--n-initial", "0", "--no-progress"]) == 2
+    assert "sot_track:" in capsys.readouterr().err
