@@ -47,6 +47,10 @@ class LabelledImage:
     name: str
     load: Callable[[], np.ndarray]
     boxes: np.ndarray
+    ignore: np.ndarray | None = None   # boxes neither used as positives nor cut as negatives
+
+    def all_boxes(self) -> np.ndarray:
+        return self.boxes if self.ignore is None or not len(self.ignore) else np.vstack([self.boxes, self.ignore])
 
 
 def _prefix_ok(name: str, include: list[str] | None, exclude: list[str] | None) -> bool:
@@ -128,13 +132,17 @@ def read_voc_folder(folder: str | Path, include: list[str] | None = None, exclud
     return out
 
 
-def read_bag(path: str | Path, every: int = 1) -> list[LabelledImage]:
-    """Frames of a ground-truth bag: ``image`` and ``ground_truth`` (table) or ``ground_truth/polygon``."""
+def read_bag(path: str | Path, every: int = 1, min_score: float = 0.0) -> list[LabelledImage]:
+    """Frames of a ground-truth bag: ``image`` and ``ground_truth`` (table) or ``ground_truth/polygon``.
+
+    Table rows with a ``state`` other than 1 (e.g. a hidden vehicle) or a ``score`` below ``min_score``
+    (e.g. the visible fraction) are *ignored*: not positives, and no negative is cut over them.
+    """
     from aircraft_docking_tracker.bag import BagReader, stamp_to_ns  # noqa: PLC0415
     from aircraft_docking_tracker.images import to_mono8  # noqa: PLC0415
     from aircraft_docking_tracker.object_table import cloud_to_table  # noqa: PLC0415
 
-    images, truth = {}, {}
+    images, truth, ignored = {}, {}, {}
     reader = BagReader(path)
     for topic, msg, _ in reader.ros_messages(["image", "ground_truth", "ground_truth/polygon"]):
         stamp = stamp_to_ns(msg.header.stamp)
@@ -142,7 +150,13 @@ def read_bag(path: str | Path, every: int = 1) -> list[LabelledImage]:
             images[stamp] = to_mono8(msg)
         elif topic == "ground_truth":
             t = cloud_to_table(msg)
-            truth[stamp] = np.column_stack([t["x"], t["y"], t["w"], t["h"]]).astype(float) if len(t) else np.zeros((0, 4))
+            boxes = np.column_stack([t["x"], t["y"], t["w"], t["h"]]).astype(float).reshape(-1, 4)
+            good = np.ones(len(t), bool)
+            if "state" in t.dtype.names:
+                good &= t["state"] == 1
+            if "score" in t.dtype.names:
+                good &= t["score"] >= min_score
+            truth[stamp], ignored[stamp] = boxes[good], boxes[~good]
         else:
             pts = np.array([[p.x, p.y] for p in msg.polygon.points]).reshape(-1, 2)
             if len(pts):
@@ -152,7 +166,8 @@ def read_bag(path: str | Path, every: int = 1) -> list[LabelledImage]:
     for k, stamp in enumerate(sorted(set(images) & set(truth))):
         if k % every == 0:
             image = images[stamp]
-            out.append(LabelledImage(f"{Path(path).name}@{stamp}", lambda image=image: image, truth[stamp]))
+            out.append(LabelledImage(f"{Path(path).name}@{stamp}", lambda image=image: image, truth[stamp],
+                                     ignored.get(stamp)))
     if not out:
         raise TrainingDataError(f"{path}: no frame has both 'image' and ground truth")
     return out
@@ -246,7 +261,7 @@ class NegativeMiner:
         self.rng.shuffle(order)
         for k in order:
             if k < len(self.data):
-                yield self.data[k].load(), self.data[k].boxes
+                yield self.data[k].load(), self.data[k].all_boxes()
             else:
                 image = cv2.imread(str(self.negative_images[k - len(self.data)]), cv2.IMREAD_GRAYSCALE)
                 if image is not None:
@@ -286,6 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--voc", nargs="*", default=[], help="Pascal VOC folders")
     p.add_argument("--bag", nargs="*", default=[], help="ground-truth bags (image + ground_truth topics)")
     p.add_argument("--bag-every", type=int, default=1, help="use every k-th frame of a bag")
+    p.add_argument("--bag-min-score", type=float, default=0.0,
+                   help="ground-truth rows scoring below this (e.g. visible fraction) are ignored")
     p.add_argument("--negative-images", nargs="*", default=[], help="folders of images with no object")
     p.add_argument("--include-prefix", nargs="*", default=None, help="only image files with these name prefixes")
     p.add_argument("--exclude-prefix", nargs="*", default=None, help="skip image files with these name prefixes")
@@ -318,7 +335,7 @@ def load_training_data(args) -> list[LabelledImage]:
     for folder in args.voc:
         data += read_voc_folder(folder, args.include_prefix, args.exclude_prefix)
     for bag in args.bag:
-        data += read_bag(bag, args.bag_every)
+        data += read_bag(bag, args.bag_every, args.bag_min_score)
     if not data:
         raise TrainingDataError("no training data: give --yolo, --voc or --bag")
     return data
