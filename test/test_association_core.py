@@ -7,7 +7,7 @@ import pytest
 from multi_target_tracker.association import (COASTING, CONFIRMED, LOST, TENTATIVE, AssociationConfig,
                                               AssociationError, MultiTargetTracker, all_pairs, angles, gated_pairs,
                                               hungarian, mahalanobis_squared, normalise_by_max, pad_square,
-                                              seed_cost)
+                                              seed_config, seed_cost)
 from multi_target_tracker.kalman import KalmanConfig
 
 FPS = 10.0
@@ -78,7 +78,7 @@ def three_targets(k, dx=2.0):
 
 
 def test_tentative_confirmed_at_lt_and_clutter_dropped():
-    cfg = AssociationConfig(confirm_length=4, tentative_max_misses=1)
+    cfg = seed_config(confirm_length=4, tentative_max_misses=1)
     tracker = MultiTargetTracker(cfg, KALMAN)
     frames = [three_targets(k) for k in range(8)]
     frames[0] = frames[0] + [box(150, 300)]                    # one clutter detection, frame 0 only
@@ -95,7 +95,7 @@ def test_tentative_confirmed_at_lt_and_clutter_dropped():
 
 
 def test_miss_coasts_then_resets_and_deletion_after_ft():
-    cfg = AssociationConfig(confirm_length=2, max_misses=3)
+    cfg = seed_config(confirm_length=2, max_misses=3)
     tracker = MultiTargetTracker(cfg, KALMAN)
     frames = [three_targets(k) for k in range(12)]
     for k in (4, 5):
@@ -115,7 +115,7 @@ def test_miss_coasts_then_resets_and_deletion_after_ft():
 
 
 def test_assignment_above_ct_counts_as_miss():
-    tracker = MultiTargetTracker(AssociationConfig(confirm_length=2), KALMAN)
+    tracker = MultiTargetTracker(seed_config(confirm_length=2), KALMAN)
     frames = [three_targets(k) for k in range(4)]
     # target 1's detection jumps far against its motion: the Hungarian still pairs it (one
     # detection per target), but its cost exceeds c_t = 0.3 (rule 2)
@@ -129,7 +129,7 @@ def test_assignment_above_ct_counts_as_miss():
 
 def test_crossing_targets_keep_their_ids():
     # Four targets in two crossing pairs (seed §4.1: crossing within frames 613-715 keeps the IDs).
-    tracker = MultiTargetTracker(AssociationConfig(confirm_length=3), KALMAN)
+    tracker = MultiTargetTracker(seed_config(confirm_length=3), KALMAN)
     frames = []
     for k in range(40):
         frames.append([box(100 + 4 * k, 100 + 2 * k), box(260 - 4 * k, 100 + 2 * k),
@@ -158,7 +158,7 @@ def test_ids_never_reused_after_reset_on_backward_stamp():
 
 # -- bad input --------------------------------------------------------------------------------
 def test_nan_inf_and_negative_size_rejected_and_counted():
-    tracker = MultiTargetTracker(AssociationConfig(confirm_length=1), KALMAN)
+    tracker = MultiTargetTracker(seed_config(confirm_length=1), KALMAN)
     boxes = np.array([box(10, 10), [np.nan, 0, 5, 5], [0, np.inf, 5, 5], [0, 0, -5, 5], [0, 0, 5, 0]])
     r = tracker.step(0.0, boxes, scores=[0.9, 0.9, 0.9, 0.9, 0.9])
     assert r.rejected == 4
@@ -174,10 +174,17 @@ def test_nan_inf_and_negative_size_rejected_and_counted():
 
 
 # -- beyond the seed --------------------------------------------------------------------------
+def test_defaults_are_the_measured_improvements_and_seed_preset_is_the_seed():
+    seed, default = seed_config(), AssociationConfig()
+    assert (seed.gate, seed.cost_gate, seed.confirm_length, seed.max_misses) == ("cost", 0.3, 15, 10)
+    assert not seed.second_pass and seed.iou_weight == 0 and seed.reacquire_frames == 0
+    assert default.gate == "mahalanobis" and default.max_misses == 10
+
+
 def test_lone_target_needs_absolute_gate():
     # Seed normalisation: with one target and one detection c = θ/maxθ + r/maxr = 0 + 1 > c_t.
     frames = [[box(50 + 2 * k, 50)] for k in range(6)]
-    seed = run(MultiTargetTracker(AssociationConfig(confirm_length=2), KALMAN), frames)
+    seed = run(MultiTargetTracker(seed_config(confirm_length=2), KALMAN), frames)
     assert seed[1].tracks.ids.tolist() == [1, 2]                 # the pair of frames 0-1 is refused
     gated = run(MultiTargetTracker(AssociationConfig(confirm_length=2, gate="mahalanobis"), KALMAN), frames)
     assert gated[-1].tracks.ids.tolist() == [1] and state_of(gated[-1], 1) == CONFIRMED
@@ -222,10 +229,19 @@ def test_reacquire_lost_track_keeps_id():
     assert state_of(kept[8], 1) == CONFIRMED and kept[-1].tracks.ids.max() == 3
 
 
-def test_iou_weight_changes_cost_only_when_set():
-    tracker = MultiTargetTracker(AssociationConfig(confirm_length=1, iou_weight=1.0, gate="mahalanobis"), KALMAN)
-    results = run(tracker, [three_targets(k) for k in range(5)])
-    assert results[-1].tracks.ids.tolist() == [1, 2, 3]
+def test_iou_term_decides_between_equally_near_detections():
+    # Two detections equally far from the prediction's centre: one the size of the target, one
+    # twice as large. Without the IoU term the distance/angle cost cannot tell them apart.
+    def go(weight):
+        cfg = AssociationConfig(confirm_length=1, iou_weight=weight, second_pass=False)
+        tracker = MultiTargetTracker(cfg, KalmanConfig(measurement_noise=5.0, size_gain=1.0))
+        for k in range(4):
+            tracker.step(k / FPS, [box(100, 100, 20, 20)])
+        big, same = box(100, 104, 40, 40), box(100, 96, 20, 20)
+        r = tracker.step(4 / FPS, [big, same])
+        return r.tracks.boxes[r.tracks.ids == 1][0]
+    assert go(3.0)[2] == pytest.approx(20.0, abs=0.5)           # stayed with the same-size box
+    assert go(0.0)[2] == pytest.approx(40.0, abs=0.5)           # order decides: the first, larger one
 
 
 def test_trail_records_history():

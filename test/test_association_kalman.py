@@ -7,6 +7,11 @@ import pytest
 from multi_target_tracker.kalman import KalmanBank, KalmanConfig, noise_gain, process_noise, transition
 
 
+def fixed(**values) -> KalmanConfig:
+    """Noise independent of the box size, as in the seed's eq. 5."""
+    return KalmanConfig(acceleration_noise_per_px=0.0, measurement_noise_per_px=0.0, **values)
+
+
 def test_matrices_of_eq6():
     T = 0.5
     np.testing.assert_allclose(transition(T), [[1, .5, 0, 0], [0, 1, 0, 0], [0, 0, 1, .5], [0, 0, 0, 1]])
@@ -19,8 +24,7 @@ def test_matrices_of_eq6():
 
 def test_predict_update_by_hand():
     # σ_a = 2 px/s², r = 1 px, σ_v0 = 3 px/s, T = 0.1 s; box (10, 20, 4, 6) -> centre (12, 23).
-    bank = KalmanBank(KalmanConfig(acceleration_noise=2.0, measurement_noise=1.0, initial_velocity_std=3.0,
-                                   size_gain=0.5))
+    bank = KalmanBank(fixed(acceleration_noise=2.0, measurement_noise=1.0, initial_velocity_std=3.0, size_gain=0.5))
     bank.add([[10, 20, 4, 6]])
     np.testing.assert_allclose(bank.x[0], [12, 0, 23, 0])
     np.testing.assert_allclose(np.diag(bank.P[0]), [1, 9, 1, 9])
@@ -44,7 +48,7 @@ def test_predict_update_by_hand():
 
 
 def test_velocity_in_pixels_per_second_from_stamps():
-    bank = KalmanBank(KalmanConfig(measurement_noise=0.01, initial_velocity_std=1000.0))
+    bank = KalmanBank(fixed(measurement_noise=0.01, initial_velocity_std=1000.0))
     bank.add([[0, 0, 2, 2]])
     for k in range(1, 20):
         bank.predict(0.04)                             # 25 frames/s
@@ -70,3 +74,14 @@ def test_keep_removes_rows():
     bank.keep(np.array([True, False, True]))
     assert len(bank) == 2
     np.testing.assert_allclose(bank.positions, [[1, 1], [22, 22]])
+
+
+def test_noise_grows_with_box_height():
+    bank = KalmanBank(KalmanConfig(measurement_noise=1.0, measurement_noise_per_px=0.1,
+                                   acceleration_noise=10.0, acceleration_noise_per_px=2.0))
+    bank.add([[0, 0, 10, 10], [0, 0, 10, 100]])
+    np.testing.assert_allclose(bank.R()[:, 0, 0], [(1 + 1) ** 2, (1 + 10) ** 2])
+    before = bank.P.copy()
+    bank.predict(0.5)
+    # velocity variance grows by σ² T² with σ = 10 + 2 h: 30 and 210 px/s²
+    np.testing.assert_allclose(bank.P[:, 1, 1] - before[:, 1, 1], [30 ** 2 * 0.25, 210 ** 2 * 0.25])

@@ -1,0 +1,391 @@
+"""Benchmark of the association core (issue 6): seed 003's tracker, each improvement, PyPI peers.
+
+    python bench/association.py [--quick] [--no-peers]
+
+Side by side in one run, on the same detections:
+
+* sequences: MOT15 TUD-Campus and the aerial airport-2 (``../shared/data/mot``; their own
+  ``det.txt``), and synthetic UAV scenes (``aircraft_docking_tracker.scenarios.uav``: ground truth
+  turned into detections with misses, clutter and jitter by ``synthesize_detections``);
+* trackers: the seed (every default), each improvement switched on alone over the gate, the
+  combination, and peers from PyPI run in their own venv ``bench/.venv-peers`` (``motpy``;
+  SORT, ByteTrack, OC-SORT from ``trackers``), because their dependencies clash with ours;
+* measures: MOTA, IDF1, ID switches, MT / ML, FP / FN (``evaluation.mot_metrics``), frames/s of
+  the tracker alone (detections in memory), and the cost of one frame against the number of
+  targets (10, 100, 1000 targets with as many detections).
+
+Writes ``bench/results/association.json`` and ``.md`` and ``bench/plots/association_*.png``.
+The same file, run with ``--peer-worker IN OUT`` by the peers' venv, runs one peer (imports only
+numpy and the peer there).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+PEER_VENV = HERE / ".venv-peers"
+PEER_PACKAGES = ["trackers==2.6.1", "motpy==0.0.10"]
+PEERS = ["SORT (trackers)", "ByteTrack (trackers)", "OC-SORT (trackers)", "motpy"]
+SCALING_TARGETS = (10, 100, 1000)
+REPEATS = 3          # frames/s: the fastest of this many identical runs, ours and the peers' alike
+
+
+# ================================================================================================
+# Peer worker: runs inside bench/.venv-peers (numpy + the peer only)
+# ================================================================================================
+def peer_worker(in_path: str, out_path: str) -> None:
+    """Track the detections in ``in_path`` (npz) with one peer; save ids, boxes and per-frame times."""
+    data = np.load(in_path, allow_pickle=False)
+    name, fps = str(data["tracker"]), float(data["fps"])
+    frames, boxes, scores = data["frame"], data["boxes"], data["score"]
+    n_frames = int(data["n_frames"])
+    starts = np.searchsorted(frames, np.arange(1, n_frames + 2))
+    best = None
+    for _ in range(int(data["repeats"])):                 # timing: the fastest of a few identical runs
+        step = _peer_stepper(name, fps)
+        out_frame, out_id, out_box, times = [], [], [], []
+        for k in range(n_frames):
+            sl = slice(starts[k], starts[k + 1])
+            b, s = boxes[sl], scores[sl]
+            xyxy = np.concatenate([b[:, :2], b[:, :2] + b[:, 2:]], axis=1) if len(b) else np.zeros((0, 4))
+            t0 = time.perf_counter()
+            ids, out_xyxy = step(xyxy, s)
+            times.append(time.perf_counter() - t0)
+            out_frame += [k + 1] * len(ids)
+            out_id += list(ids)
+            out_box += [np.concatenate([o[:2], o[2:] - o[:2]]) for o in out_xyxy]
+        if best is None or sum(times) < sum(best):
+            best = times
+    times = best
+    np.savez(out_path, frame=np.array(out_frame, dtype=np.int64), id=np.array(out_id, dtype=np.int64),
+             boxes=np.array(out_box, dtype=np.float64).reshape(-1, 4), times=np.array(times))
+
+
+def _peer_stepper(name: str, fps: float):
+    """A function (xyxy, scores) -> (ids, xyxy) for one peer at its default settings."""
+    if name == "motpy":
+        from motpy import Detection, MultiObjectTracker  # noqa: PLC0415
+
+        tracker = MultiObjectTracker(dt=1.0 / fps)
+        id_map: dict[str, int] = {}
+
+        def step(xyxy, scores):
+            tracker.step([Detection(box=b, score=float(s)) for b, s in zip(xyxy, scores)])
+            tracks = tracker.active_tracks(min_steps_alive=3)
+            ids = [id_map.setdefault(t.id, len(id_map) + 1) for t in tracks]
+            return ids, [np.asarray(t.box, dtype=np.float64) for t in tracks]
+        return step
+
+    import supervision as sv  # noqa: PLC0415
+    import trackers  # noqa: PLC0415
+
+    cls = {"SORT (trackers)": trackers.SORTTracker, "ByteTrack (trackers)": trackers.ByteTrackTracker,
+           "OC-SORT (trackers)": trackers.OCSORTTracker}[name]
+    tracker = cls(frame_rate=fps)
+
+    def step(xyxy, scores):
+        det = sv.Detections(xyxy=xyxy.astype(np.float32).reshape(-1, 4), confidence=scores.astype(np.float32),
+                            class_id=np.zeros(len(xyxy), dtype=int))
+        res = tracker.update(det)
+        keep = res.tracker_id >= 0
+        return list(res.tracker_id[keep]), list(res.xyxy[keep])
+    return step
+
+
+# ================================================================================================
+# The benchmark (our venv)
+# ================================================================================================
+def variants():
+    """Our tracker's configurations: the seed, then one improvement added at a time, then options."""
+    from multi_target_tracker.association import AssociationConfig, seed_config  # noqa: PLC0415
+    from multi_target_tracker.kalman import KalmanConfig  # noqa: PLC0415
+
+    kalman = KalmanConfig()
+    fixed_noise = KalmanConfig(acceleration_noise=400.0, acceleration_noise_per_px=0.0, measurement_noise=4.0,
+                               measurement_noise_per_px=0.0)
+    seed_gate = dict(gate="mahalanobis")
+    short = dict(seed_gate, confirm_length=4, tentative_max_misses=1)
+    default = AssociationConfig()
+    show = dict(coasting=True, backfill=False)           # the node's defaults: coasting tracks published
+    return {
+        "seed (§3 as written)": dict(show, config=seed_config(), kalman=kalman),
+        "+ Mahalanobis gate": dict(show, config=seed_config(**seed_gate), kalman=kalman),
+        "+ l_t 4, tentative drop": dict(show, config=seed_config(**short), kalman=kalman),
+        "+ IoU cost": dict(show, config=seed_config(**short, iou_weight=3.0), kalman=kalman),
+        "+ second pass = default": dict(show, config=default, kalman=kalman),
+        "default, fixed-size noise": dict(show, config=default, kalman=fixed_noise),
+        "default + re-acquire": dict(show, config=AssociationConfig(reacquire_frames=60), kalman=kalman),
+        "default, no coasting out": dict(config=default, kalman=kalman, coasting=False, backfill=False),
+        "default, no coasting, backfill (offline)": dict(config=default, kalman=kalman, coasting=False,
+                                                         backfill=True),
+    }
+
+
+def load_sequences(quick: bool) -> dict:
+    """name -> dict(det rows, gt rows, fps, n_frames). MOT rows (``motchallenge.MOT_ROW_DTYPE``)."""
+    from multi_target_tracker import motchallenge as mc  # noqa: PLC0415
+
+    data = Path(os.environ.get("ADT_SHARED_DATA", REPO.parent / "shared" / "data")) / "mot"
+    seqs = {}
+    for name, fps in (("TUD-Campus", 25.0), ("airport-2", 30.0)):
+        folder = data / name
+        if not (folder / "det.txt").is_file():
+            print(f"[association bench] {folder} absent: skipped", file=sys.stderr)
+            continue
+        info = mc.read_seqinfo(folder)
+        det, gt = mc.read_detections(folder / "det.txt"), mc.read_ground_truth(folder / "gt.txt")
+        n = int(max(det["frame"].max(), gt["frame"].max(), info.get("seqLength", 0)))
+        seqs[name] = dict(det=det, gt=gt, fps=info.get("frameRate", fps), n_frames=n, source=str(folder))
+    seqs.update(synthetic_uav(quick))
+    return seqs
+
+
+def synthetic_uav(quick: bool) -> dict:
+    """UAV scenes (issue 3's generator): visible ground truth -> detections with misses, clutter, jitter."""
+    from aircraft_docking_tracker.scenarios.uav import UavScene, UavSceneConfig, synthesize_detections  # noqa: PLC0415
+    from multi_target_tracker import motchallenge as mc  # noqa: PLC0415
+
+    out = {}
+    frames = 150 if quick else 400
+    for name, difficulty, seed in (("uav-normal", 1, 3), ("uav-hard", 2, 5)):
+        cfg = UavSceneConfig(frames=frames, difficulty=difficulty)
+        scene = UavScene(cfg, seed=seed)
+        rng = np.random.default_rng(seed)
+        det_rows, gt_rows = [], []
+        for f in scene.frames():
+            k = f.index + 1
+            gt = f.ground_truth[f.ground_truth["state"] == 1]           # hidden vehicles are not scored
+            det = synthesize_detections(f.ground_truth, rng, miss_rate=0.1, clutter_rate=1.0, jitter_px=1.5,
+                                        frame_size=(cfg.width, cfg.height), hidden_below=cfg.hidden_below)
+            gt_rows.append(mc.make_rows(k, gt["id"], np.stack([gt["x"], gt["y"], gt["w"], gt["h"]], 1)))
+            det_rows.append(mc.make_rows(k, -np.ones(len(det)), np.stack([det["x"], det["y"], det["w"], det["h"]], 1),
+                                         det["score"]))
+        out[name] = dict(det=np.concatenate(det_rows), gt=np.concatenate(gt_rows), fps=cfg.fps, n_frames=frames,
+                         source=f"UavScene(difficulty={difficulty}, seed={seed}), miss 0.1, clutter 1/frame, "
+                                f"jitter 1.5 px")
+    return out
+
+
+def run_ours(seq: dict, variant: dict, repeats: int = 1) -> tuple[np.ndarray, float]:
+    """Results rows and the seconds the core spent (the fastest of ``repeats`` identical runs)."""
+    seconds = []
+    for _ in range(repeats):
+        rows, spent = _run_ours_once(seq, variant)
+        seconds.append(spent)
+    return rows, min(seconds)
+
+
+def _run_ours_once(seq: dict, variant: dict) -> tuple[np.ndarray, float]:
+    from multi_target_tracker.association import MultiTargetTracker  # noqa: PLC0415
+    from multi_target_tracker.mot_track import track_sequence  # noqa: PLC0415
+
+    tracker = MultiTargetTracker(variant["config"], variant["kalman"])
+    times = []
+    step = tracker.step
+
+    def timed_step(*args, **kwargs):                  # time the core's frame, as the peers' update is timed
+        t0 = time.perf_counter()
+        result = step(*args, **kwargs)
+        times.append(time.perf_counter() - t0)
+        return result
+    tracker.step = timed_step
+    rows, _ = track_sequence(seq["det"], seq["fps"], tracker, seq["n_frames"], include_coasting=variant["coasting"],
+                             backfill=variant["backfill"])
+    return rows, float(np.sum(times))
+
+
+def ensure_peer_venv() -> Path | None:
+    python = PEER_VENV / "bin" / "python"
+    if not python.exists():
+        print("[association bench] creating bench/.venv-peers (trackers, motpy)...", file=sys.stderr)
+        try:
+            subprocess.run([sys.executable, "-m", "venv", str(PEER_VENV)], check=True)
+            subprocess.run([str(python), "-m", "pip", "install", "-q", *PEER_PACKAGES], check=True)
+        except (subprocess.CalledProcessError, OSError) as exc:
+            print(f"[association bench] peers unavailable: {exc}", file=sys.stderr)
+            return None
+    return python
+
+
+def run_peer(python: Path, name: str, det: np.ndarray, fps: float, n_frames: int,
+             repeats: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Run one peer in its venv; returns (MOT rows, per-frame seconds)."""
+    from multi_target_tracker import motchallenge as mc  # noqa: PLC0415
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src, dst = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
+        np.savez(src, tracker=name, fps=fps, n_frames=n_frames, repeats=repeats, frame=det["frame"].astype(np.int64),
+                 boxes=mc.boxes(det), score=det["score"])
+        subprocess.run([str(python), __file__, "--peer-worker", str(src), str(dst)], check=True,
+                       env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+        res = np.load(dst, allow_pickle=False)
+        rows = np.concatenate([mc.make_rows(int(f), [i], b) for f, i, b in zip(res["frame"], res["id"], res["boxes"])]) \
+            if len(res["frame"]) else mc.make_rows(1, [], np.zeros((0, 4)))
+        return rows, res["times"]
+
+
+def scaling_scene(n: int, frames: int = 8, seed: int = 0) -> np.ndarray:
+    """n targets spread over a square with room for them, constant velocities, jittered detections."""
+    from multi_target_tracker import motchallenge as mc  # noqa: PLC0415
+
+    rng = np.random.default_rng(seed)
+    side = 60.0 * np.sqrt(n) + 200
+    pos = rng.uniform(0, side, (n, 2))
+    vel = rng.normal(0, 1.0, (n, 2))
+    rows = []
+    for k in range(1, frames + 1):
+        centre = pos + k * vel + rng.normal(0, 0.5, (n, 2))
+        rows.append(mc.make_rows(k, -np.ones(n), np.concatenate([centre - 10, np.full((n, 2), 20.0)], 1),
+                                 np.full(n, 0.9)))
+    return np.concatenate(rows)
+
+
+def scaling(variant_list: dict, python: Path | None, quick: bool) -> dict:
+    """Milliseconds per frame (median of the last frames) against the number of targets."""
+    from multi_target_tracker.association import MultiTargetTracker  # noqa: PLC0415
+    from multi_target_tracker import motchallenge as mc  # noqa: PLC0415
+
+    frames = 6 if quick else 10
+    out: dict = {}
+    for n in SCALING_TARGETS:
+        det = scaling_scene(n, frames)
+        for name in ("seed (§3 as written)", "+ second pass = default"):
+            v = variant_list[name]
+            tracker = MultiTargetTracker(v["config"], v["kalman"])
+            times = []
+            for k, rows in mc.frames(det, 1, frames):
+                t0 = time.perf_counter()
+                tracker.step(k / 25.0, mc.boxes(rows), rows["score"])
+                times.append(time.perf_counter() - t0)
+            out.setdefault(name, {})[n] = 1e3 * float(np.median(times[2:]))
+        if python is not None:
+            for peer in PEERS:
+                if peer == "motpy" and n > 100:
+                    continue                                  # pure-Python per-track loops: minutes at 1000
+                _, times = run_peer(python, peer, det, 25.0, frames)
+                out.setdefault(peer, {})[n] = 1e3 * float(np.median(times[2:]))
+    return out
+
+
+def metrics_row(gt, rows, seconds, n_frames) -> dict:
+    from aircraft_docking_tracker.evaluation.mot_metrics import evaluate_rows  # noqa: PLC0415
+
+    s = evaluate_rows(gt, rows)
+    cont = [c.longest_continuous / max(c.frames_present, 1) for c in s.continuity]
+    return dict(mota=100 * s.mota, idf1=100 * s.idf1, motp=100 * s.motp, idsw=s.num_switches,
+                frag=s.num_fragmentations, mt=s.mostly_tracked, ml=s.mostly_lost, fp=s.num_false_positives,
+                fn=s.num_misses, gt_targets=s.num_unique_objects, fps=n_frames / max(seconds, 1e-9),
+                continuity=100 * float(np.mean(cont)) if cont else float("nan"))
+
+
+def write_markdown(path: Path, results: dict, scale: dict, meta: dict) -> None:
+    lines = ["# Association benchmark (issue 6)", "",
+             f"Run {meta['date']} on {meta['machine']}; {'quick' if meta['quick'] else 'full'} mode. "
+             "MOTA, IDF1, continuity in percent; continuity = seed 003 Fig. 4, mean over ground-truth targets of "
+             "(longest run tracked under one id) / (frames present); fps = tracker alone, detections in memory.", ""]
+    for seq, rows in results.items():
+        lines += [f"## {seq}", "", f"Source: {meta['sources'][seq]}", "",
+                  "| tracker | MOTA | IDF1 | IDSW | MT | ML | FP | FN | continuity | frames/s |",
+                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for name, r in rows.items():
+            lines.append(f"| {name} | {r['mota']:.1f} | {r['idf1']:.1f} | {r['idsw']} | {r['mt']} | {r['ml']} | "
+                         f"{r['fp']} | {r['fn']} | {r['continuity']:.1f} | {r['fps']:.0f} |")
+        lines.append("")
+    lines += ["## Cost of one frame against the number of targets (ms, as many detections as targets)", "",
+              "| tracker | " + " | ".join(str(n) for n in SCALING_TARGETS) + " |",
+              "|---|" + "---:|" * len(SCALING_TARGETS)]
+    for name, by_n in scale.items():
+        lines.append(f"| {name} | " + " | ".join(f"{by_n[n]:.2f}" if n in by_n else "–" for n in SCALING_TARGETS) + " |")
+    lines.append("")
+    path.write_text("\n".join(lines))
+
+
+def plot(results: dict, scale: dict) -> None:
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    plots = HERE / "plots"
+    plots.mkdir(parents=True, exist_ok=True)
+    seqs = list(results)
+    names = list(next(iter(results.values())))
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5), sharey=False)
+    width = 0.8 / len(names)
+    for ax, key in zip(axes, ("mota", "idf1")):
+        for i, name in enumerate(names):
+            vals = [results[s].get(name, {}).get(key, np.nan) for s in seqs]
+            ax.bar(np.arange(len(seqs)) + i * width, vals, width, label=name)
+        ax.set_xticks(np.arange(len(seqs)) + 0.4 - width / 2)
+        ax.set_xticklabels(seqs)
+        ax.set_title(key.upper())
+        ax.axhline(0, color="k", lw=0.5)
+    axes[1].legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(plots / "association_accuracy.png", dpi=90)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for name, by_n in scale.items():
+        ns = sorted(by_n)
+        ax.loglog(ns, [by_n[n] for n in ns], "o-", label=name)
+    ax.axhline(50, color="r", ls="--", lw=0.8, label="50 ms")
+    ax.set_xlabel("targets (= detections) per frame")
+    ax.set_ylabel("ms per frame")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(plots / "association_scaling.png", dpi=90)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="shorter synthetic scenes and scaling runs (~1-2 min)")
+    parser.add_argument("--no-peers", action="store_true", help="skip the PyPI peers")
+    parser.add_argument("--peer-worker", nargs=2, metavar=("IN", "OUT"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.peer_worker:
+        peer_worker(*args.peer_worker)
+        return 0
+    sys.path.insert(0, str(REPO))
+    from tqdm import tqdm  # noqa: PLC0415
+
+    seqs = load_sequences(args.quick)
+    ours = variants()
+    python = None if args.no_peers else ensure_peer_venv()
+    results: dict = {}
+    jobs = [(s, n) for s in seqs for n in ours] + ([(s, p) for s in seqs for p in PEERS] if python else [])
+    for seq_name, name in tqdm(jobs, desc="association bench", unit="run"):
+        seq = seqs[seq_name]
+        if name in ours:
+            rows, seconds = run_ours(seq, ours[name], REPEATS)
+        else:
+            rows, times = run_peer(python, name, seq["det"], seq["fps"], seq["n_frames"], REPEATS)
+            seconds = float(times.sum())
+        results.setdefault(seq_name, {})[name] = metrics_row(seq["gt"], rows, seconds, seq["n_frames"])
+    scale = scaling(ours, python, args.quick)
+    meta = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine=f"{os.cpu_count()} cores",
+                quick=args.quick, sources={k: v["source"] for k, v in seqs.items()},
+                variants={k: dict(config=vars(v["config"]), kalman=vars(v["kalman"]), coasting=v["coasting"],
+                                  backfill=v["backfill"]) for k, v in ours.items()})
+    out = HERE / "results"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "association.json").write_text(json.dumps(dict(meta=meta, sequences=results, scaling_ms=scale),
+                                                      indent=1, default=str))
+    write_markdown(out / "association.md", results, scale, meta)
+    plot(results, scale)
+    print((out / "association.md").read_text())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
