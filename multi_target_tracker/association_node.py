@@ -27,7 +27,7 @@ from aircraft_docking_tracker.config import param
 from aircraft_docking_tracker.markers import boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
-from aircraft_docking_tracker.processing import MessageProcessor
+from aircraft_docking_tracker.processing import MessageProcessor, ProcessorSpec
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker, Tracks
 from multi_target_tracker.kalman import KalmanConfig
 from multi_target_tracker.mot_track import KALMAN_PREFIX, NODE_NAME
@@ -168,6 +168,15 @@ class AssociationProcessor(MessageProcessor):
                 "tracks confirmed": int(((states == 1) | (states == 2)).sum()),
                 "invalid detection rows": self.invalid_detections, "track resets": self.resets,
                 "next id": self.tracker.next_id}
+
+
+def build(configs: dict) -> AssociationProcessor:
+    return AssociationProcessor(configs[""], configs[KALMAN_PREFIX], configs[OUTPUT_PREFIX])
+
+
+#: How the live node and ``run_offline`` build the same processor from config/association.yaml.
+SPEC = ProcessorSpec(NODE_NAME, {"": AssociationConfig, KALMAN_PREFIX: KalmanConfig,
+                                 OUTPUT_PREFIX: AssociationOutputConfig}, build)
 
 
 class AssociationNode(PerceptionNode):

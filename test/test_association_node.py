@@ -49,6 +49,25 @@ def test_yaml_lists_every_parameter_with_its_default():
     assert params == pytest.approx(expected)
 
 
+def test_offline_runner_over_a_bag_matches_the_processor(tmp_path):
+    from aircraft_docking_tracker.offline import build_processor, run  # noqa: PLC0415
+
+    assert isinstance(build_processor("association"), AssociationProcessor)
+    src, dst = tmp_path / "in.mcap", tmp_path / "out.mcap"
+    with BagWriter(src) as writer:
+        for k in range(8):
+            writer.write("/detections", detections_msg(k), int(1e9 + k * 1e8))
+    run(src, dst, ["association"], progress=False)
+    reader = BagReader(dst)
+    assert reader.topics["/tracks"].count == 8 and "/tracks/markers" in reader.topics
+    offline = [cloud_to_table(m, TRACK_DTYPE) for _, m, _ in reader.ros_messages(["/tracks"])]
+    proc = AssociationProcessor()                                    # the package defaults, as run_offline
+    direct = [cloud_to_table(dict(proc.process("detections", detections_msg(k)))["tracks"], TRACK_DTYPE)
+              for k in range(8)]
+    assert all((a == b).all() for a, b in zip(offline, direct))
+    assert sorted(offline[-1]["id"].tolist()) == [1, 2]
+
+
 def test_processor_tracks_rejects_and_resets():
     invalid = []
     proc = AssociationProcessor(FAST, on_invalid=invalid.append)
