@@ -241,9 +241,11 @@ def train_stage(xp: np.ndarray, xn: np.ndarray, cfg: CascadeTrainConfig,
 
 def train_cascade(xp: np.ndarray, mine_negatives: Callable[[Cascade, int], np.ndarray], cfg: CascadeTrainConfig,
                   window: tuple[int, int], edge_threshold: float, rotate90: bool = False,
-                  progress: Callable[[str], None] | None = None) -> Cascade:
+                  progress: Callable[[str], None] | None = None,
+                  on_stage: Callable[[Cascade], None] | None = None) -> Cascade:
     """Train stage after stage; ``mine_negatives(cascade, n)`` returns up to ``n`` negative vectors that
-    the cascade so far passes (bootstrapping). Stops at ``cfg.stages`` or when negatives run out."""
+    the cascade so far passes (bootstrapping). Stops at ``cfg.stages`` or when negatives run out.
+    ``on_stage(cascade)`` is called after every stage (e.g. to save a usable model early)."""
     xp = np.asarray(xp, np.uint8)
     if xp.ndim != 2 or xp.shape[1] != FUSED_DIM or len(xp) < 2:
         raise CascadeError(f"need at least 2 positive vectors of {FUSED_DIM} values, got {xp.shape}")
@@ -264,5 +266,8 @@ def train_cascade(xp: np.ndarray, mine_negatives: Callable[[Cascade, int], np.nd
         overall_far *= far
         say(f"stage {k + 1}/{cfg.stages}: {len(stage.features)} stumps, positives {len(xp_k)}, "
             f"negatives {len(xn)}, hit {hit:.4f}, false alarms {far:.4f} (cascade ~{overall_far:.2e})")
+        cascade.info["stage_count"] = len(cascade.stages)
+        if on_stage is not None:
+            on_stage(cascade)
     cascade.info["stage_count"] = len(cascade.stages)
     return cascade

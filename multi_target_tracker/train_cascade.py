@@ -360,13 +360,18 @@ def run(args) -> Cascade:
                                                 min_size=min_size, max_size=max_size),
                           args.rotate90, args.negative_iou, rng)
     say(f"mining negatives at window heights {min_size:.0f}..{max_size:.0f} px")
-    cascade = train_cascade(xp, miner, cfg, window, args.edge_threshold, args.rotate90, progress=say)
-    cascade.info.update({"data": [str(p) for p in args.yolo + args.voc + args.bag],
-                         "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
-                         "flips": args.flips, "search_min_size": min_size, "search_max_size": max_size,
-                         "train_seconds": round(time.perf_counter() - t0, 1)})
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-    cascade.save(args.output)
+    info = {"data": [str(p) for p in args.yolo + args.voc + args.bag],
+            "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
+            "flips": args.flips, "jitter": args.jitter, "search_min_size": min_size, "search_max_size": max_size}
+
+    def save(cascade: Cascade) -> None:  # after every stage: an interrupted run still leaves a model
+        cascade.info.update(info, train_seconds=round(time.perf_counter() - t0, 1))
+        cascade.save(args.output)
+
+    cascade = train_cascade(xp, miner, cfg, window, args.edge_threshold, args.rotate90, progress=say,
+                            on_stage=save)
+    save(cascade)
     say(f"wrote {args.output}: {len(cascade.stages)} stages, {cascade.n_stumps} stumps")
     return cascade
 
