@@ -37,7 +37,7 @@ PEER_VENV = HERE / ".venv-peers"
 PEER_PACKAGES = ["trackers==2.6.1", "motpy==0.0.10"]
 PEERS = ["SORT (trackers)", "ByteTrack (trackers)", "OC-SORT (trackers)", "motpy"]
 SCALING_TARGETS = (10, 100, 1000)
-REPEATS = 3          # frames/s: the fastest of this many identical runs, ours and the peers' alike
+REPEATS = 3          # frames/s: the fastest of this many identical runs, ours and the peers' alike (1 in --quick)
 
 
 # ================================================================================================
@@ -125,6 +125,7 @@ def variants():
         "+ second pass = default": dict(show, config=default, kalman=kalman),
         "default, fixed-size noise": dict(show, config=default, kalman=fixed_noise),
         "default + re-acquire": dict(show, config=AssociationConfig(reacquire_frames=60), kalman=kalman),
+        "default, no angle term": dict(show, config=AssociationConfig(angle_weight=0.0), kalman=kalman),
         "default, no coasting out": dict(config=default, kalman=kalman, coasting=False, backfill=False),
         "default, no coasting, backfill (offline)": dict(config=default, kalman=kalman, coasting=False,
                                                          backfill=True),
@@ -277,6 +278,22 @@ def scaling(variant_list: dict, python: Path | None, quick: bool) -> dict:
     return out
 
 
+def speed_duel(seq: dict, variant: dict, python: Path | None, rounds: int) -> dict:
+    """Frames/s of our default and the SORT-family peers, timed in alternation ``rounds`` times.
+
+    The machine is shared, so each tracker's best round is kept and the trackers take turns, so
+    that a busy spell hits them alike. Returns name -> frames/s.
+    """
+    best: dict[str, float] = {}
+    for _ in range(rounds):
+        _, seconds = run_ours(seq, variant, 1)
+        best["ours (default)"] = max(best.get("ours (default)", 0.0), seq["n_frames"] / seconds)
+        for peer in ([] if python is None else PEERS[:3]):
+            _, times = run_peer(python, peer, seq["det"], seq["fps"], seq["n_frames"], 1)
+            best[peer] = max(best.get(peer, 0.0), seq["n_frames"] / float(times.sum()))
+    return best
+
+
 def metrics_row(gt, rows, seconds, n_frames) -> dict:
     from aircraft_docking_tracker.evaluation.mot_metrics import evaluate_rows  # noqa: PLC0415
 
@@ -288,7 +305,7 @@ def metrics_row(gt, rows, seconds, n_frames) -> dict:
                 continuity=100 * float(np.mean(cont)) if cont else float("nan"))
 
 
-def write_markdown(path: Path, results: dict, scale: dict, meta: dict) -> None:
+def write_markdown(path: Path, results: dict, scale: dict, meta: dict, speed: dict) -> None:
     lines = ["# Association benchmark (issue 6)", "",
              f"Run {meta['date']} on {meta['machine']}; {'quick' if meta['quick'] else 'full'} mode. "
              "MOTA, IDF1, continuity in percent; continuity = seed 003 Fig. 4, mean over ground-truth targets of "
@@ -301,7 +318,12 @@ def write_markdown(path: Path, results: dict, scale: dict, meta: dict) -> None:
             lines.append(f"| {name} | {r['mota']:.1f} | {r['idf1']:.1f} | {r['idsw']} | {r['mt']} | {r['ml']} | "
                          f"{r['fp']} | {r['fn']} | {r['continuity']:.1f} | {r['fps']:.0f} |")
         lines.append("")
-    lines += ["## Cost of one frame against the number of targets (ms, as many detections as targets)", "",
+    lines += ["## Frames/s, SORT family, timed in alternation (best of the rounds)", "",
+              "| sequence | " + " | ".join(next(iter(speed.values()), {})) + " |",
+              "|---|" + "---:|" * len(next(iter(speed.values()), {}))]
+    for seq, by_name in speed.items():
+        lines.append(f"| {seq} | " + " | ".join(f"{v:.0f}" for v in by_name.values()) + " |")
+    lines += ["", "## Cost of one frame against the number of targets (ms, as many detections as targets)", "",
               "| tracker | " + " | ".join(str(n) for n in SCALING_TARGETS) + " |",
               "|---|" + "---:|" * len(SCALING_TARGETS)]
     for name, by_n in scale.items():
@@ -363,25 +385,30 @@ def main(argv=None) -> int:
     ours = variants()
     python = None if args.no_peers else ensure_peer_venv()
     results: dict = {}
+    repeats = 1 if args.quick else REPEATS
     jobs = [(s, n) for s in seqs for n in ours] + ([(s, p) for s in seqs for p in PEERS] if python else [])
     for seq_name, name in tqdm(jobs, desc="association bench", unit="run"):
         seq = seqs[seq_name]
         if name in ours:
-            rows, seconds = run_ours(seq, ours[name], REPEATS)
+            rows, seconds = run_ours(seq, ours[name], repeats)
         else:
-            rows, times = run_peer(python, name, seq["det"], seq["fps"], seq["n_frames"], REPEATS)
+            rows, times = run_peer(python, name, seq["det"], seq["fps"], seq["n_frames"], repeats)
             seconds = float(times.sum())
         results.setdefault(seq_name, {})[name] = metrics_row(seq["gt"], rows, seconds, seq["n_frames"])
     scale = scaling(ours, python, args.quick)
+    default_online = ours["default, no coasting out"]
+    speed = {name: speed_duel(seqs[name], default_online, python, 2 if args.quick else 5)
+             for name in ("TUD-Campus", "airport-2") if name in seqs}
     meta = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine=f"{os.cpu_count()} cores",
                 quick=args.quick, sources={k: v["source"] for k, v in seqs.items()},
                 variants={k: dict(config=vars(v["config"]), kalman=vars(v["kalman"]), coasting=v["coasting"],
                                   backfill=v["backfill"]) for k, v in ours.items()})
     out = HERE / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "association.json").write_text(json.dumps(dict(meta=meta, sequences=results, scaling_ms=scale),
+    (out / "association.json").write_text(json.dumps(dict(meta=meta, sequences=results, scaling_ms=scale,
+                                                           frames_per_s_duel=speed),
                                                       indent=1, default=str))
-    write_markdown(out / "association.md", results, scale, meta)
+    write_markdown(out / "association.md", results, scale, meta, speed)
     plot(results, scale)
     print((out / "association.md").read_text())
     return 0

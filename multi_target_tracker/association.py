@@ -81,6 +81,8 @@ class AssociationConfig:
                                 low=1, high=100000)
     tentative_max_misses: int = param(1, "a tentative track is dropped when its missed counter exceeds this",
                                       low=0, high=100000)
+    angle_weight: float = param(1.0, "weight of the direction term θ/max θ in the cost (eq. 10: 1)",
+                                low=0.0, high=100.0)
     still_speed: float = param(1.0, "below this speed [px/s] a target has no direction: θ = 0 for it",
                                low=0.0, high=1e6)
     min_score: float = param(0.0, "detections scoring below this are ignored", low=-1e9, high=1e9)
@@ -107,7 +109,7 @@ class AssociationConfig:
 def seed_config(**overrides) -> AssociationConfig:
     """Seed 003 §3 as written: c_t gate on the matrix-normalised cost, l_t = 15, f_t = 10, nothing added."""
     values = dict(gate="cost", cost_gate=0.3, confirm_length=15, max_misses=10, tentative_max_misses=10,
-                  iou_weight=0.0, second_pass=False, reacquire_frames=0)
+                  angle_weight=1.0, iou_weight=0.0, second_pass=False, reacquire_frames=0)
     values.update(overrides)
     return validate(AssociationConfig(**values))
 
@@ -190,11 +192,16 @@ def normalise_by_max(values: np.ndarray) -> np.ndarray:
     return values / top if top > 0 else np.zeros_like(values)
 
 
-def seed_cost(origins, predicted, velocities, points, still_speed) -> np.ndarray:
-    """Eq. 10 per pair: ``c_ij = θ_ij / max θ + r_ij / max r``, maxima over the pairs given."""
-    theta = angles(origins, velocities, points, still_speed)
+def seed_cost(origins, predicted, velocities, points, still_speed, angle_weight: float = 1.0) -> np.ndarray:
+    """Eq. 10 per pair: ``c_ij = θ_ij / max θ + r_ij / max r``, maxima over the pairs given.
+
+    ``angle_weight`` scales the direction term (1 in the seed).
+    """
     r = distances(predicted, points)
-    return normalise_by_max(theta) + normalise_by_max(r)
+    if angle_weight == 0:
+        return normalise_by_max(r)
+    theta = angles(origins, velocities, points, still_speed)
+    return angle_weight * normalise_by_max(theta) + normalise_by_max(r)
 
 
 def mahalanobis_squared(predicted: np.ndarray, S_inv: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -406,7 +413,7 @@ class MultiTargetTracker:
             i, j = all_pairs(len(targets), len(detections))
         # θ from the last estimate (every target existed before this frame's births), r from the prediction
         pair_cost = seed_cost(previous[targets][i], predicted[i], self.bank.velocities[targets][i], points[j],
-                              cfg.still_speed)
+                              cfg.still_speed, cfg.angle_weight)
         if cfg.iou_weight > 0:
             pair_cost += cfg.iou_weight * (1.0 - box_iou(self.bank.boxes(targets[i]), boxes[detections[j]]))
         cost = np.full((len(targets), len(detections)), EXCLUDED)

@@ -42,6 +42,10 @@ def test_angle_and_normalised_cost_by_hand():
     r = np.array([1.0, 3.0, np.hypot(9, 1), 12.0])
     np.testing.assert_allclose(cost, theta / np.pi + r / 12.0)
     assert normalise_by_max(np.zeros(4)).max() == 0.0
+    no_angle = seed_cost(positions[i], predicted[i], velocities[i], points[j], 0.5, angle_weight=0.0)
+    np.testing.assert_allclose(no_angle, r / 12.0)
+    half = seed_cost(positions[i], predicted[i], velocities[i], points[j], 0.5, angle_weight=0.5)
+    np.testing.assert_allclose(half, 0.5 * theta / np.pi + r / 12.0)
 
 
 def test_mahalanobis_pairs_by_hand_and_kdtree_agrees_with_brute_force():
