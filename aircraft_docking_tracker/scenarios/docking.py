@@ -199,8 +199,8 @@ class DockingScene:
         self.camera = StandCamera(cfg.width, cfg.height, cfg.camera_distance_m, cfg.camera_height_m, cfg.pitch_deg)
         self.growth = cfg.growth or float(rng.uniform(4.3, 6.0))
         self.turn_deg = (cfg.turn_deg or float(rng.uniform(20.0, 40.0))) * rng.choice([-1.0, 1.0])
-        weathers = ["clear", "clear", "rain", "low_sun"] if cfg.difficulty < 2 else ["rain", "low_sun", "clear"]
-        self.weather = cfg.weather if cfg.weather != "auto" else str(rng.choice(weathers[: 1 + 2 * cfg.difficulty]))
+        weathers = {0: ["clear"], 1: ["clear", "clear", "rain", "low_sun"], 2: ["rain", "low_sun", "clear"]}[cfg.difficulty]
+        self.weather = cfg.weather if cfg.weather != "auto" else str(rng.choice(weathers))
         occluders = {0: ["none"], 1: ["vehicle", "vehicle", "jet_bridge"], 2: ["both", "vehicle"]}[cfg.difficulty]
         self.occluder = cfg.occluder if cfg.occluder != "auto" else str(rng.choice(occluders))
         self.noise_sigma = (1.5, 4.0, 8.0)[cfg.difficulty]

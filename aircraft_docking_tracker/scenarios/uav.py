@@ -231,29 +231,41 @@ class UavScene:
         """Hide some vehicles for up to ``max_hide_frames``: under a canopy or (hard) in smoke."""
         cfg = self.config
         self.smoke: list[dict] = []
-        n_hide = {0: 0, 1: max(1, self.n_vehicles // 4), 2: max(2, self.n_vehicles // 3)}[cfg.difficulty]
+        n_hide = {0: 0, 1: max(1, self.n_vehicles // 5), 2: max(2, self.n_vehicles // 4)}[cfg.difficulty]
         if cfg.max_hide_frames <= 0:
             n_hide = 0
         centers, radii = [], []
         seen = self.in_view()
-        for v in rng.permutation(np.flatnonzero(seen.sum(axis=1) > 40))[:n_hide]:
-            duration = int(rng.integers(min(30, cfg.max_hide_frames), cfg.max_hide_frames + 1))
+        speed = np.linalg.norm(np.diff(self.track[:, :, :2], axis=1), axis=2)
+        movers = np.flatnonzero((seen.sum(axis=1) > 40) & (speed.min(axis=1) >= 1.0))
+        for v in rng.permutation(movers)[:n_hide]:
+            radius = 0.5 * np.hypot(self.length[v], self.width_px[v]) + 4
+            # entering and leaving the cover adds about 2 (radius + 6) / speed frames of hiding
+            longest = cfg.max_hide_frames - int(2 * (radius + 6) / speed[v].min())
+            duration = int(rng.integers(min(30, max(longest, 1)), max(longest, 1) + 1))
             frames_seen = np.flatnonzero(seen[v])
             t0 = int(rng.choice(frames_seen[: max(1, len(frames_seen) - duration // 2)]))
             path = self.track[v, t0:t0 + duration, :2]
-            radius = 0.5 * np.hypot(self.length[v], self.width_px[v]) + 4
             if cfg.difficulty == 2 and rng.random() < 0.5:
                 centre = path.mean(axis=0)
                 reach = np.linalg.norm(path - centre, axis=1).max() + radius + 6
-                self.smoke.append({"center": centre, "radius": float(min(reach, 130)), "t0": t0, "t1": t0 + duration})
+                self.smoke.append({"center": centre, "radius": float(min(reach, 100)), "t0": t0, "t1": t0 + duration})
             else:
                 step = max(1, int(radius / 2 / max(np.median(np.linalg.norm(np.diff(path, axis=0), axis=1)), 0.1)))
                 centers += [p for p in path[::step]]
                 radii += [radius + rng.uniform(2, 6) for _ in path[::step]]
-        # decorative groves too, so that canopies are not a give-away
+        # decorative groves too, so that canopies are not a give-away; off every vehicle's path, so
+        # that the only long hiding is the planned one (<= max_hide_frames)
         h, w = self.world_size
-        for _ in range(int(rng.integers(4, 10))):
+        path_points = self.track[:, ::3, :2].reshape(-1, 2)
+        groves = int(rng.integers(4, 10))
+        for _ in range(40 * groves):
+            if groves == 0:
+                break
             c = rng.uniform(0, 1, 2) * (w, h)
+            if np.min(np.linalg.norm(path_points - c, axis=1)) < 110:
+                continue
+            groves -= 1
             for _ in range(int(rng.integers(3, 12))):
                 centers.append(c + rng.normal(0, 25, 2))
                 radii.append(float(rng.uniform(10, 22)))
