@@ -160,3 +160,17 @@ def test_results_file_of_quadrilaterals_shorter_than_ground_truth(tmp_path):
     bad.write_text("1,2,3\n")
     with pytest.raises(ValueError, match="columns"):
         ev.evaluate_files(bad, gt)
+
+
+def test_truncated_bag_is_flagged_or_refused_clearly(tmp_path):
+    frames = [_table(GT[0])] * 200
+    bag = _write(tmp_path / "full.mcap", {m.GROUND_TRUTH: frames, m.TRACKS: frames})
+    data = bag.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * 0.9)])
+    r = ev.evaluate_bags(cut)
+    assert r["inputs"]["truncated"] == [str(cut)]
+    assert r["mot"]["mota"] == pytest.approx(1.0)
+    cut.write_bytes(data[:40])
+    with pytest.raises(ValueError, match="cut.mcap"):
+        ev.evaluate_bags(cut)

@@ -301,7 +301,10 @@ def evaluate_bags(output_bag: str | Path, gt_bag: str | Path | None = None, conf
     if not {"sot", "mot", "detection"} & set(result):
         raise EvaluationError(f"nothing to score: output topics {sorted(out_streams)}, ground truth topics "
                               f"{sorted(gt_streams)} in {gt_path}")
-    result["inputs"] = {"output": str(output_bag), "ground_truth": str(gt_path)}
+    from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415
+
+    result["inputs"] = {"output": str(output_bag), "ground_truth": str(gt_path),
+                        "truncated": [str(p) for p in {output_bag, gt_path} if BagReader(p).truncated]}
     return result
 
 
@@ -452,6 +455,10 @@ def main(argv=None) -> int:
     except (ValueError, OSError) as exc:
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
+    for name, r in results.items():
+        for path in r["inputs"].get("truncated", []):
+            print(f"evaluate: warning: {path} is truncated (a recording killed hard?); scored up to its last "
+                  "complete record", file=sys.stderr)
     print(report.format_report(results), flush=True)
     if args.report:
         folder = Path(args.report)
