@@ -174,3 +174,14 @@ def test_truncated_bag_is_flagged_or_refused_clearly(tmp_path):
     cut.write_bytes(data[:40])
     with pytest.raises(ValueError, match="cut.mcap"):
         ev.evaluate_bags(cut)
+
+
+def test_topics_of_live_recordings_resolve_to_the_agreed_names():
+    live = {"/tracks": 0, "/ground_truth": 0, "/image": 0}
+    assert ev.resolve_topics(live, ("tracks", "ground_truth")) == {"/tracks": "tracks", "/ground_truth": "ground_truth"}
+    two = {"/cam0/tracks": 0, "/cam1/tracks": 0}
+    with pytest.raises(ev.EvaluationError, match="namespace"):
+        ev.resolve_topics(two, ("tracks",))
+    assert ev.resolve_topics(two, ("tracks",), "cam1") == {"/cam1/tracks": "tracks"}
+    assert ev.resolve_topics({"docking/polygon": 0, "ground_truth/polygon": 0}, ("docking/polygon",)) == \
+        {"docking/polygon": "docking/polygon"}

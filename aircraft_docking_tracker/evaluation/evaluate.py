@@ -67,6 +67,7 @@ class EvaluateConfig:
     track_states: str = param("1,2", "track states scored (0 tentative, 1 confirmed, 2 coasting, 3 lost)")
     hidden_below: float = param(0.3, "ground-truth rows whose visible fraction (score) is below this are ignored",
                                 low=0.0, high=1.0)
+    namespace: str = param("", "camera namespace of the topics (e.g. cam0); empty: the one there is")
 
     def validate(self) -> None:
         try:
@@ -96,23 +97,44 @@ class Stream:
     log_ns: dict
 
 
-def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(IMAGE,)) -> dict:
-    """``topic -> Stream`` for the ``topics`` present in the bag; values are decoded messages
-    (None for ``stamps_only`` topics, whose log times are all that is needed: images)."""
+def resolve_topics(available, wanted, namespace: str = "") -> dict:
+    """``bag topic -> agreed relative name`` for each wanted name found in ``available``.
+
+    A live recording holds absolute names (``/tracks``, ``/cam0/tracks``), a generated bag relative
+    ones (``tracks``): ``namespace/name`` matches with or without the leading slash; with no
+    namespace given, a single topic ending in ``/name`` matches too (several: say which namespace).
+    """
+    out = {}
+    for name in wanted:
+        full = f"{namespace.strip('/')}/{name}".strip("/")
+        exact = [t for t in available if t.strip("/") == full]
+        if not exact and not namespace:
+            exact = [t for t in available if t.endswith("/" + name)]
+        if len(exact) > 1:
+            raise EvaluationError(f"several topics end in {name!r} ({', '.join(sorted(exact))}): give --namespace")
+        if exact:
+            out[exact[0]] = name
+    return out
+
+
+def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(IMAGE,), namespace: str = "") -> dict:
+    """``topic -> Stream`` for the ``topics`` (agreed relative names) present in the bag; values are
+    decoded messages (None for ``stamps_only`` topics, whose log times are all that is needed: images)."""
     from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415 (ROS message classes)
 
     reader = BagReader(path)
-    present = [t for t in topics if t in reader.topics]
-    streams = {t: Stream({}, {}) for t in present}
-    total = sum(reader.topics[t].count for t in present)
-    for item in tqdm(reader.messages(present), total=total, desc=f"reading {Path(path).name}",
+    names = resolve_topics(reader.topics, topics, namespace)
+    streams = {name: Stream({}, {}) for name in names.values()}
+    total = sum(reader.topics[t].count for t in names)
+    for item in tqdm(reader.messages(list(names)), total=total, desc=f"reading {Path(path).name}",
                      disable=not progress or total < 2000, unit="msg"):
-        stream = streams[item.topic]
-        if item.topic == GT_STAND:
+        name = names[item.topic]
+        stream = streams[name]
+        if name == GT_STAND:
             stream.values[0] = item.deserialize().data
             continue
         stamp = header_stamp_ns(item.data)
-        stream.values[stamp] = None if item.topic in stamps_only else item.deserialize()
+        stream.values[stamp] = None if name in stamps_only else item.deserialize()
         stream.log_ns[stamp] = item.log_time_ns
     return streams
 
@@ -294,10 +316,13 @@ def evaluate_bags(output_bag: str | Path, gt_bag: str | Path | None = None, conf
     Returns ``{"sot"|"mot"|"detection": metrics, "speed": {...}}`` for the families present;
     raises EvaluationError when no family can be scored.
     """
-    out_streams = read_streams(output_bag, (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON), progress)
+    cfg = validate(config or EvaluateConfig())
+    out_streams = read_streams(output_bag, (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON), progress,
+                               namespace=cfg.namespace)
     gt_path = gt_bag or output_bag
-    gt_streams = read_streams(gt_path, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND), progress)
-    result = evaluate_streams(out_streams, gt_streams, config)
+    gt_streams = read_streams(gt_path, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND), progress,
+                              namespace=cfg.namespace)
+    result = evaluate_streams(out_streams, gt_streams, cfg)
     if not {"sot", "mot", "detection"} & set(result):
         raise EvaluationError(f"nothing to score: output topics {sorted(out_streams)}, ground truth topics "
                               f"{sorted(gt_streams)} in {gt_path}")
@@ -347,7 +372,7 @@ def evaluate_files(results: str | Path, gt: str | Path, config: EvaluateConfig |
     first = next((ln for ln in results.read_text().splitlines() if ln.strip()), "")
     columns = len(first.replace(",", " ").split())
     if gt.suffix == ".mcap" or gt.is_dir():
-        streams = read_streams(gt, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND))
+        streams = read_streams(gt, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND), namespace=cfg.namespace)
         key = GT_POLYGON if columns in (4, 8) else GROUND_TRUTH
         if key not in streams:
             raise EvaluationError(f"{gt}: no {key} topic for a {'single' if key == GT_POLYGON else 'multi'}-target results file")
@@ -397,23 +422,27 @@ def write_plots(results: dict, folder: str | Path) -> list[Path]:
     return written
 
 
-def write_strip(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, count: int = 6):
+def write_strip(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, count: int = 6,
+                namespace: str = ""):
     """Frames of the bag's ``image`` topic with ground truth (green) and outputs (magenta) drawn in."""
     from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415
     from aircraft_docking_tracker.images import to_bgr8  # noqa: PLC0415
 
-    source = next((p for p in (output_bag, gt_bag) if p is not None and IMAGE in BagReader(p).topics), None)
-    if source is None:
+    for source in (p for p in (output_bag, gt_bag) if p is not None):
+        reader = BagReader(source)
+        image_topic = next(iter(resolve_topics(reader.topics, (IMAGE,), namespace)), None)
+        if image_topic is not None:
+            break
+    else:
         return None
-    reader = BagReader(source)
-    n = reader.topics[IMAGE].count
+    n = reader.topics[image_topic].count
     wanted = set(np.linspace(0, n - 1, min(count, n)).astype(int).tolist())
     images = {}
-    for k, item in enumerate(reader.messages([IMAGE])):
+    for k, item in enumerate(reader.messages([image_topic])):
         if k in wanted:
             images[header_stamp_ns(item.data)] = to_bgr8(item.deserialize())
-    outs = read_streams(output_bag, (DOCKING_POLYGON, TRACKS, DETECTIONS))
-    gts = read_streams(gt_bag or output_bag, (GT_POLYGON, GROUND_TRUTH))
+    outs = read_streams(output_bag, (DOCKING_POLYGON, TRACKS, DETECTIONS), namespace=namespace)
+    gts = read_streams(gt_bag or output_bag, (GT_POLYGON, GROUND_TRUTH), namespace=namespace)
     tiles = []
     for stamp, image in sorted(images.items()):
         for streams, color in ((gts, plots.GT_COLOR), (outs, plots.RESULT_COLOR)):
@@ -467,7 +496,7 @@ def main(argv=None) -> int:
         first = args.outputs[0]
         if Path(first).suffix != ".txt":
             strip = write_strip(first, args.gt if args.gt and Path(args.gt).suffix == ".mcap" else None,
-                                folder / "strip.png")
+                                folder / "strip.png", namespace=cfg.namespace)
             written += [strip] if strip else []
         print(f"\nreport: {folder / 'report.json'}" + "".join(f"\n        {p}" for p in written))
     return 0
