@@ -61,7 +61,10 @@ def iou_over_time_plot(runs: dict, path: str | Path, title: str = "") -> Path:
         err = np.array([np.nan if e is None else e for e in s["center_error"]], float)
         ax_e.plot(err, label=name, lw=1)
     ax_i.set(ylabel="IoU", ylim=(0, 1.02))
-    ax_e.set(ylabel="centre error [px]", xlabel="scored frame", yscale="log")
+    ax_e.set(ylabel="centre error [px]", xlabel="scored frame")
+    errors = [e for s in runs.values() for e in s["center_error"] if e is not None and e > 0]
+    if errors:                                   # log scale needs a positive value (all lost: none)
+        ax_e.set_yscale("log")
     ax_i.legend(fontsize=8)
     for ax in (ax_i, ax_e):
         ax.grid(alpha=0.3)
