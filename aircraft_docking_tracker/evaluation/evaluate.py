@@ -36,18 +36,21 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from aircraft_docking_tracker.bag import BagReader
 from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments, param, validate
 from aircraft_docking_tracker.evaluation import plots, report
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, DetectionMetricsConfig
 from aircraft_docking_tracker.evaluation.mot_metrics import MotEvaluator
 from aircraft_docking_tracker.evaluation.sot_metrics import SotMetricsConfig, box_iou, box_to_quad, score_sequence
 from aircraft_docking_tracker.evaluation.speed import latency_percentiles, stream_fps
-from aircraft_docking_tracker.object_table import TRACK_DTYPE
+from aircraft_docking_tracker.images import to_bgr8
+from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table
+from aircraft_docking_tracker.scenarios.datasets import mot_rows_to_tracks, read_results_regions, read_sot_boxes
+from aircraft_docking_tracker.scenarios.messages import (DETECTIONS, DOCKING_POLYGON, GROUND_TRUTH, GT_NOSE,
+                                                        GT_POLYGON, GT_STAND, IMAGE, TRACKS, polygon_to_quad)
+from multi_target_tracker import motchallenge
 from multi_target_tracker.motchallenge import boxes as _boxes
 
-IMAGE, DETECTIONS, TRACKS = "image", "detections", "tracks"
-DOCKING_POLYGON, GROUND_TRUTH = "docking/polygon", "ground_truth"
-GT_POLYGON, GT_NOSE, GT_STAND = "ground_truth/polygon", "ground_truth/nose", "ground_truth/stand"
 OUTPUT_TOPICS = (DOCKING_POLYGON, TRACKS, DETECTIONS)
 
 
@@ -120,8 +123,6 @@ def resolve_topics(available, wanted, namespace: str = "") -> dict:
 def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(IMAGE,), namespace: str = "") -> dict:
     """``topic -> Stream`` for the ``topics`` (agreed relative names) present in the bag; values are
     decoded messages (None for ``stamps_only`` topics, whose log times are all that is needed: images)."""
-    from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415 (ROS message classes)
-
     reader = BagReader(path)
     names = resolve_topics(reader.topics, topics, namespace)
     streams = {name: Stream({}, {}) for name in names.values()}
@@ -139,16 +140,7 @@ def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(
     return streams
 
 
-def _quad(msg) -> np.ndarray:
-    from aircraft_docking_tracker.scenarios.messages import polygon_to_quad  # noqa: PLC0415
-
-    return polygon_to_quad(msg)
-
-
-def _table(msg) -> np.ndarray:
-    from aircraft_docking_tracker.object_table import cloud_to_table  # noqa: PLC0415
-
-    return cloud_to_table(msg)
+_quad, _table = polygon_to_quad, cloud_to_table
 
 
 # --- scoring, one family each ---------------------------------------------------------------------
@@ -202,9 +194,7 @@ def score_mot(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
     evaluator = MotEvaluator(cfg.iou_threshold)
     states = cfg.states()
     missing = 0
-    frame_of = {}
     for frame, s in enumerate(sorted(gt), start=1):
-        frame_of[frame] = s
         truth = gt[s]
         hyp = out.get(s)
         if hyp is None:
@@ -279,9 +269,6 @@ def score_speed(streams: dict) -> dict:
 
 # --- whole bags and files ---------------------------------------------------------------------------
 
-ALL_TOPICS = (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON, GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND)
-
-
 def _decoded(streams: dict, topic: str, convert) -> dict:
     return {s: convert(v) for s, v in streams[topic].values.items()} if topic in streams else {}
 
@@ -326,34 +313,19 @@ def evaluate_bags(output_bag: str | Path, gt_bag: str | Path | None = None, conf
     if not {"sot", "mot", "detection"} & set(result):
         raise EvaluationError(f"nothing to score: output topics {sorted(out_streams)}, ground truth topics "
                               f"{sorted(gt_streams)} in {gt_path}")
-    from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415
-
     result["inputs"] = {"output": str(output_bag), "ground_truth": str(gt_path),
                         "truncated": [str(p) for p in {output_bag, gt_path} if BagReader(p).truncated]}
     return result
 
 
 def _sot_gt_from_file(path: Path) -> dict:
-    from aircraft_docking_tracker.scenarios.datasets import read_sot_boxes  # noqa: PLC0415
-
     boxes, _ = read_sot_boxes(path)
     return dict(enumerate(box_to_quad(boxes)))
 
 
 def _mot_tables_from_file(path: Path) -> dict:
-    from multi_target_tracker import motchallenge  # noqa: PLC0415
-
     rows = motchallenge.read_ground_truth(path) if path.name.startswith("gt") else motchallenge.read_mot(path)
-    tables = {}
-    for frame, r in motchallenge.frames(rows):
-        t = np.zeros(len(r), TRACK_DTYPE)
-        t["id"] = r["id"]
-        for name in ("x", "y", "w", "h", "score"):
-            t[name] = r[name]
-        t["score"] = np.where(r["visibility"] >= 0, r["visibility"], 1.0) if path.name.startswith("gt") else r["score"]
-        t["state"] = 1
-        tables[frame] = t
-    return tables
+    return {frame: mot_rows_to_tracks(r) for frame, r in motchallenge.frames(rows)}
 
 
 def evaluate_files(results: str | Path, gt: str | Path, config: EvaluateConfig | None = None) -> dict:
@@ -364,8 +336,6 @@ def evaluate_files(results: str | Path, gt: str | Path, config: EvaluateConfig |
     ground-truth message of a bag. A single-target results file shorter than its ground truth is
     scored on its own frames (``ground_truth_frames`` tells how many there were).
     """
-    from aircraft_docking_tracker.scenarios.datasets import read_results_regions  # noqa: PLC0415
-
     cfg = validate(config or EvaluateConfig())
     results, gt = Path(results), Path(gt)
     stand = gt_nose = None
@@ -425,9 +395,6 @@ def write_plots(results: dict, folder: str | Path) -> list[Path]:
 def write_strip(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, count: int = 6,
                 namespace: str = ""):
     """Frames of the bag's ``image`` topic with ground truth (green) and outputs (magenta) drawn in."""
-    from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415
-    from aircraft_docking_tracker.images import to_bgr8  # noqa: PLC0415
-
     for source in (p for p in (output_bag, gt_bag) if p is not None):
         reader = BagReader(source)
         image_topic = next(iter(resolve_topics(reader.topics, (IMAGE,), namespace)), None)

@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from aircraft_docking_tracker.bag import BagWriter
 from aircraft_docking_tracker.evaluation.sot_metrics import box_to_quad
-from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from aircraft_docking_tracker.scenarios import datasets
 from aircraft_docking_tracker.scenarios import messages as m
 from aircraft_docking_tracker.scenarios.datasets import DatasetError
@@ -61,26 +61,6 @@ def convert_sot(folder: Path, out: Path, fps: float, max_frames: int = 0, progre
     return {"kind": "sot", "format": fmt, "frames": n, "images": len(frames), "boxes": len(boxes), "topics": counts}
 
 
-def mot_ground_truth_table(rows: np.ndarray, previous: dict, fps: float) -> np.ndarray:
-    """MOT gt rows of one frame -> TRACK_DTYPE (velocity from the same id's box one frame earlier)."""
-    table = np.zeros(len(rows), TRACK_DTYPE)
-    table["id"] = rows["id"]
-    for name in ("x", "y", "w", "h"):
-        table[name] = rows[name]
-    visibility = rows["visibility"]
-    table["score"] = np.where(visibility >= 0, visibility, 1.0)
-    table["class_id"] = np.maximum(rows["cls"], 0)
-    table["state"] = 1
-    for k, r in enumerate(rows):
-        centre = np.array([r["x"] + r["w"] / 2, r["y"] + r["h"] / 2])
-        prev = previous.get(int(r["id"]))
-        if prev is not None and prev[0] == r["frame"] - 1:
-            table["vx"][k], table["vy"][k] = (centre - prev[1]) * fps
-            table["age"][k] = prev[2] + 1
-        previous[int(r["id"])] = (int(r["frame"]), centre, int(table["age"][k]))
-    return table
-
-
 def convert_mot(folder: Path, out: Path, fps: float | None, max_frames: int = 0, progress: bool = True,
                 overwrite: bool = False) -> dict:
     det_path = folder / "det.txt" if (folder / "det.txt").is_file() else folder / "det" / "det.txt"
@@ -111,7 +91,7 @@ def convert_mot(folder: Path, out: Path, fps: float | None, max_frames: int = 0,
                 table["class_id"] = np.maximum(d["cls"], 0)
                 bag.write(m.DETECTIONS, m.cloud_msg(table, hdr), stamp)
             if gts is not None:
-                bag.write(m.GROUND_TRUTH, m.cloud_msg(mot_ground_truth_table(g, previous, fps), hdr), stamp)
+                bag.write(m.GROUND_TRUTH, m.cloud_msg(datasets.mot_rows_to_tracks(g, previous, fps), hdr), stamp)
         counts = bag.topic_counts
     return {"kind": "mot", "frames": last, "fps": fps, "topics": counts}
 

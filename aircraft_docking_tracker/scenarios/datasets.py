@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from aircraft_docking_tracker.evaluation.sot_metrics import box_to_quad
-from aircraft_docking_tracker.object_table import DETECTION_DTYPE
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
 
@@ -105,6 +105,32 @@ def read_yolo_labels(path: str | Path, width: int, height: int) -> np.ndarray:
         cls, cx, cy, w, h = r
         out[k] = ((cx - w / 2) * width, (cy - h / 2) * height, w * width, h * height, 1.0, int(cls))
     return out
+
+
+def mot_rows_to_tracks(rows: np.ndarray, previous: dict | None = None, fps: float = 0.0) -> np.ndarray:
+    """One frame's MOTChallenge rows (``motchallenge.MOT_ROW_DTYPE``) -> ``TRACK_DTYPE`` rows.
+
+    ``score`` = the row's visibility where the file gives one, else 1; ``state`` 1. With a
+    ``previous`` dict carried from frame to frame (and ``fps``), ``vx, vy`` [px/s] and ``age`` come
+    from the same id's box one frame earlier.
+    """
+    table = np.zeros(len(rows), TRACK_DTYPE)
+    table["id"] = rows["id"]
+    for name in ("x", "y", "w", "h"):
+        table[name] = rows[name]
+    table["score"] = np.where(rows["visibility"] >= 0, rows["visibility"], 1.0)
+    table["class_id"] = np.maximum(rows["cls"], 0)
+    table["state"] = 1
+    if previous is None:
+        return table
+    for k, r in enumerate(rows):
+        centre = np.array([r["x"] + r["w"] / 2, r["y"] + r["h"] / 2])
+        prev = previous.get(int(r["id"]))
+        if prev is not None and prev[0] == r["frame"] - 1:
+            table["vx"][k], table["vy"][k] = (centre - prev[1]) * fps
+            table["age"][k] = prev[2] + 1
+        previous[int(r["id"])] = (int(r["frame"]), centre, int(table["age"][k]))
+    return table
 
 
 def dataset_kind(folder: str | Path) -> str:
