@@ -144,3 +144,15 @@ def test_perfect_tracker_on_a_docking_bag_scores_full_marks(tmp_path):
     assert r["success_auc"] == pytest.approx(20 / 21)            # IoU 1 passes every threshold but 1.0
     assert r["precision"] == 1.0 and r["lost_frames"] == 0
     assert r["nose_error_median"] < 0.01
+    assert r["stop_error_m"] == pytest.approx(0.0, abs=1e-3)
+    # a quadrilateral of half the area around the same nose reads the aircraft sqrt(2) times farther
+    stand = json.loads(DockingScene(DockingSceneConfig(frames=6, width=320, height=240), seed=6).stand_json())
+    last = frames[-1]
+    small = last.nose + (last.quad - last.nose) / np.sqrt(2)
+    quads.write_text("".join(",".join(f"{v:.4f}" for v in q.ravel()) + "\n"
+                             for q in [f.quad for f in frames[:-1]] + [small]))
+    r = ev.evaluate_files(quads, out)["sot"]
+    depth = stand["camera"]["focal_px"] * stand["metres_per_template_px"] / np.sqrt(
+        abs(np.linalg.det(last.affine[:2, :2])))
+    assert r["stop_along_m"] == pytest.approx(depth * (np.sqrt(2) - 1), rel=1e-3)
+    assert abs(r["stop_lateral_m"]) < 1e-3

@@ -33,6 +33,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -174,7 +175,31 @@ def score_sot(gt: dict, out: dict, cfg: EvaluateConfig, stand: dict | None = Non
         err = np.array([e for e in err if np.isfinite(e)])
         result["nose_error_median"] = float(np.median(err)) if err.size else float("nan")
         result["nose_error_final"] = float(err[-1]) if err.size else float("nan")
+        result.update(stop_errors(pred[-1], truth[-1], gt_nose.get(stamps[-1]), stand, uv))
     return result
+
+
+def stop_errors(final_quad: np.ndarray, final_truth: np.ndarray, final_nose, stand: dict, nose_uv) -> dict:
+    """Docking guidance at the last frame, in metres: how far the tracked aircraft is from the truth.
+
+    Distance from the camera comes from the apparent size, as a docking guidance system reads it:
+    depth = focal x (metres per template px) / scale, scale = sqrt(quad area / template area);
+    ``stop_along_m`` = tracked depth - true depth (+ = the tracker sees the aircraft short of where
+    it is); ``stop_lateral_m`` = horizontal nose offset x depth / focal; ``stop_error_m`` = both.
+    """
+    if final_nose is None or "metres_per_template_px" not in stand:
+        return {}
+    focal = stand["camera"]["focal_px"]
+    template_area = float(np.prod(stand["template_size"]))
+
+    def depth(quad):
+        area = cv2.contourArea(np.asarray(quad, np.float32).reshape(-1, 1, 2))
+        return focal * stand["metres_per_template_px"] / np.sqrt(area / template_area) if area > 0 else np.nan
+
+    tracked = nose_from_quad(final_quad, nose_uv)
+    along = depth(final_quad) - depth(final_truth) if np.isfinite(final_quad).all() else np.nan
+    lateral = (tracked[0] - final_nose[0]) * depth(final_truth) / focal
+    return {"stop_along_m": float(along), "stop_lateral_m": float(lateral), "stop_error_m": float(np.hypot(along, lateral))}
 
 
 def hidden_rows(table: np.ndarray, cfg: EvaluateConfig) -> np.ndarray:

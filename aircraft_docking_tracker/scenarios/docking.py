@@ -101,8 +101,10 @@ class StandCamera:
         return np.stack([self.cx + self.f * (d @ self.right) / z, self.cy + self.f * (d @ self.down) / z], axis=1)
 
     def as_dict(self) -> dict:
-        return {"focal_px": self.f, "cx": self.cx, "cy": self.cy, "position_m": self.position.tolist(),
-                "pitch_deg": self.pitch_deg, "looks_along": "+Y"}
+        return {"width": self.width, "height": self.height, "focal_px": self.f, "cx": self.cx, "cy": self.cy,
+                "distance_m": -float(self.position[1]), "height_m": float(self.position[2]),
+                "position_m": self.position.tolist(), "pitch_deg": self.pitch_deg, "looks_along": "+Y"}
+
 
 
 def lead_in_path(turn_deg: float, straight_m: float, curve_m: float, total_m: float, step_m: float = 0.5):
@@ -266,7 +268,7 @@ class DockingScene:
             "stop_line_ground": stop.tolist(),
             "stop_line_image": np.round(self.camera.project(to3(stop)), 2).tolist(),
             "stop_nose_image": np.round(self.camera.project([0.0, 0.0, NOSE_HEIGHT_M])[0], 2).tolist(),
-            "nose_height_m": NOSE_HEIGHT_M, "camera": self.camera.as_dict(),
+            "nose_height_m": NOSE_HEIGHT_M, "camera": self.camera.as_dict(), "metres_per_template_px": M_PER_TPL,
             "template_size": [TEMPLATE_W, TEMPLATE_H], "nose_template": NOSE_TPL.tolist(),
             "stop_frame": int(self.n_move - 1), "growth": self.growth, "turn_deg": self.turn_deg,
             "weather": self.weather, "occluder": self.occluder, "seed": self.seed,
