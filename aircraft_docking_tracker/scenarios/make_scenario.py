@@ -81,6 +81,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_config_arguments(parser, DockingSceneConfig)
     add_config_arguments(parser, UavSceneConfig)
+    # options both kinds share, with both defaults in the help (these replace the per-kind ones)
+    parser.add_argument("--fps", type=float, default=None,
+                        help="camera frame rate [Hz] (default: docking 14, seed 000's camera; uav 25)")
+    parser.add_argument("--difficulty", type=int, default=None, choices=[0, 1, 2],
+                        help="0 easy, 1 normal, 2 hard: noise, weather, occlusion, vehicles, hiding (default 1)")
     return parser
 
 
