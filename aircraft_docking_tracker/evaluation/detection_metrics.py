@@ -8,7 +8,9 @@ Definitions (the seed's Table 1 reports 正确率 "detection rate" 95.2 % and �
   (``iou_threshold``). A matched detection is a true positive (TP), an unmatched one a false
   positive (FP); a ground-truth box left unmatched is a miss (FN).
 * **detection rate** = TP / number of ground-truth boxes (recall);
-* **false-alarm rate** = FP / number of detections (= 1 - precision);
+* **false-alarm rate** = FP / number of detections (= 1 - precision). The two are independent:
+  Table 1's pairs do not sum to 100 % (89.7 + 15.9, 93.9 + 8.3), so its "correct rate" is not
+  1 - false-alarm rate, i.e. it is read as recall;
 * **precision-recall curve**: all detections of all frames sorted by decreasing score; after the
   k-th, precision = TP_k / k and recall = TP_k / #GT;
 * **average precision**: the area under that curve with PASCAL VOC's all-point interpolation
