@@ -39,12 +39,9 @@ SPRITE_SCALE = 2                          # the sprite is drawn at 2x the templa
 
 
 @dataclass
-class DockingSceneConfig:
+class DockingSceneConfig(render.StreamConfig):
     """Everything that shapes a docking scene (the seed picks the rest)."""
 
-    width: int = param(640, "image width [px]", low=160, high=3840)
-    height: int = param(480, "image height [px]", low=120, high=2160)
-    frames: int = param(300, "number of frames", low=2, high=100000)
     fps: float = param(14.0, "camera frame rate [Hz] (seed 000's camera: 14)", low=1.0, high=120.0)
     difficulty: int = param(1, "0 easy (clear, little noise), 1 normal, 2 hard (noise, weather, occlusion)",
                             low=0, high=2)

@@ -6,10 +6,23 @@ the ``numpy.random.Generator`` passed in, so a scene is a pure function of its s
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
+from aircraft_docking_tracker.config import param
+
 EPOCH_NS = 1_700_000_000 * 10**9          # first frame stamp of every synthetic scene (fixed: determinism)
+
+
+@dataclass
+class StreamConfig:
+    """What every synthetic camera stream has: image size and length (each scene adds its own)."""
+
+    width: int = param(640, "image width [px]", low=160, high=3840)
+    height: int = param(480, "image height [px]", low=120, high=2160)
+    frames: int = param(300, "number of frames", low=2, high=100000)
 
 
 def frame_stamp_ns(index: int, fps: float) -> int:

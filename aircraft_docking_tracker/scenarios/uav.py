@@ -38,12 +38,9 @@ SPRITE_SUPERSAMPLE = 4
 
 
 @dataclass
-class UavSceneConfig:
+class UavSceneConfig(render.StreamConfig):
     """Everything that shapes a UAV scene (the seed picks the rest)."""
 
-    width: int = param(640, "image width [px]", low=160, high=3840)
-    height: int = param(480, "image height [px]", low=120, high=2160)
-    frames: int = param(300, "number of frames", low=2, high=100000)
     fps: float = param(25.0, "camera frame rate [Hz]", low=1.0, high=120.0)
     difficulty: int = param(1, "0 easy (few vehicles, no hiding), 1 normal, 2 hard (many, smoke, clutter)",
                             low=0, high=2)
