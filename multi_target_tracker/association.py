@@ -57,7 +57,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from aircraft_docking_tracker.config import param, validate
-from multi_target_tracker.kalman import KalmanBank, KalmanConfig, inverse_2x2
+from multi_target_tracker.kalman import KalmanBank, KalmanConfig
 from multi_target_tracker.motchallenge import box_iou
 
 TENTATIVE, CONFIRMED, COASTING, LOST = 0, 1, 2, 3
@@ -204,29 +204,27 @@ def seed_cost(origins, predicted, velocities, points, still_speed, angle_weight:
     return angle_weight * normalise_by_max(theta) + normalise_by_max(r)
 
 
-def mahalanobis_squared(predicted: np.ndarray, S_inv: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """d² = (z − Hx̂)ᵀ S⁻¹ (z − Hx̂) per pair, with ``S_inv`` the pair's inverse innovation covariance."""
+def mahalanobis_squared(predicted: np.ndarray, s: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """d² = (z − Hx̂)ᵀ S⁻¹ (z − Hx̂) per pair, with S = s I the pair's innovation covariance."""
     dx, dy = points[:, 0] - predicted[:, 0], points[:, 1] - predicted[:, 1]
-    return S_inv[:, 0, 0] * dx * dx + 2.0 * S_inv[:, 0, 1] * dx * dy + S_inv[:, 1, 1] * dy * dy
+    return (dx * dx + dy * dy) / s
 
 
-def gated_pairs(predicted: np.ndarray, S: np.ndarray, points: np.ndarray, gate: float,
+def gated_pairs(predicted: np.ndarray, s: np.ndarray, points: np.ndarray, gate: float,
                 brute_force_below: int = 4096) -> tuple[np.ndarray, np.ndarray]:
-    """The (i, j) pairs with d²_ij <= ``gate``.
+    """The (i, j) pairs with d²_ij <= ``gate`` (``s``: innovation variances of the targets).
 
     Candidates come from every pair for small matrices, else from a KD-tree around each predicted
-    position with the gate's largest radius ``sqrt(gate · λ_max(S_i))``; the exact test follows.
+    position with the gate's radius ``sqrt(gate · s_i)``; the exact test follows.
     """
     m, n = len(predicted), len(points)
     if m * n <= brute_force_below:
         i, j = all_pairs(m, n)
     else:
-        half_trace = (S[:, 0, 0] + S[:, 1, 1]) / 2.0
-        lam_max = half_trace + np.sqrt(((S[:, 0, 0] - S[:, 1, 1]) / 2.0) ** 2 + S[:, 0, 1] ** 2)
-        near = cKDTree(points).query_ball_point(predicted, r=np.sqrt(gate * lam_max) + 1e-9)
+        near = cKDTree(points).query_ball_point(predicted, r=np.sqrt(gate * s) * (1 + 1e-9))
         i = np.repeat(np.arange(m), [len(c) for c in near])
         j = np.fromiter((k for c in near for k in c), dtype=np.intp, count=len(i))
-    d2 = mahalanobis_squared(predicted[i], inverse_2x2(S)[i], points[j])
+    d2 = mahalanobis_squared(predicted[i], s[i], points[j])
     keep = d2 <= gate
     return i[keep], j[keep]
 
@@ -363,17 +361,17 @@ class MultiTargetTracker:
         dets = np.concatenate(matched_d).astype(np.intp)
 
         # Rule 3: assigned targets are updated with their detections; the counter is reset.
-        self.bank.update(rows, centres[dets], boxes[dets, 2:])
+        # Rule 1 (and rule 2's refused assignments): the others are updated with their prediction
+        # and count a miss. Both filter updates run as one batch.
+        missed = _without(np.arange(len(self.bank)), rows, len(self.bank))
+        self.bank.update_frame(rows, centres[dets], boxes[dets, 2:], missed)
         self.hits[rows] += 1
         self.misses[rows] = 0
         self.scores[rows] = scores[dets]
         self.class_ids[rows] = class_ids[dets]
-        # Rule 1 (and rule 2's rejected assignments): update with the prediction, count the miss.
-        missed = _without(np.arange(len(self.bank)), rows, len(self.bank))
-        self.bank.coast(missed)
         self.misses[missed] += 1
         confirmed_now = self._update_states(rows, missed)
-        self._record(rows, missed)
+        self._record(rows)
         self._delete()
         self._start(boxes[unmatched], scores[unmatched], class_ids[unmatched])
         return FrameResult(self.tracks(), rejected, was_reset, confirmed_now, self.frame_index)
@@ -408,14 +406,15 @@ class MultiTargetTracker:
         points = centres[detections]
         predicted = self.bank.positions[targets]
         if cfg.gate == "mahalanobis":
-            i, j = gated_pairs(predicted, self.bank.innovation_covariance()[targets], points, cfg.mahalanobis_gate)
+            i, j = gated_pairs(predicted, self.bank.innovation_variance(targets), points, cfg.mahalanobis_gate)
         else:
             i, j = all_pairs(len(targets), len(detections))
+        ti = targets[i]
         # θ from the last estimate (every target existed before this frame's births), r from the prediction
-        pair_cost = seed_cost(previous[targets][i], predicted[i], self.bank.velocities[targets][i], points[j],
+        pair_cost = seed_cost(previous[ti], predicted[i], self.bank.velocities[ti], points[j],
                               cfg.still_speed, cfg.angle_weight)
         if cfg.iou_weight > 0:
-            pair_cost += cfg.iou_weight * (1.0 - box_iou(self.bank.boxes(targets[i]), boxes[detections[j]]))
+            pair_cost += cfg.iou_weight * (1.0 - box_iou(self.bank.boxes(ti), boxes[detections[j]]))
         cost = np.full((len(targets), len(detections)), EXCLUDED)
         cost[i, j] = pair_cost
         t, d = hungarian(cost)
@@ -447,12 +446,13 @@ class MultiTargetTracker:
         self.states[gone] = LOST
         return self.ids[promoted].tolist()
 
-    def _record(self, rows: np.ndarray, missed: np.ndarray) -> None:
-        boxes = self.bank.boxes()
-        matched = np.zeros(len(boxes), dtype=bool)
+    def _record(self, rows: np.ndarray) -> None:
+        """Append this frame's box of every track to its history (trails, offline backfill)."""
+        matched = np.zeros(len(self.bank), dtype=bool)
         matched[rows] = True
-        for i, h in enumerate(self.history):
-            h.append((self.frame_index, *boxes[i], bool(matched[i])))
+        k = self.frame_index
+        for h, (x, y, w, hh), m in zip(self.history, self.bank.boxes().tolist(), matched.tolist()):
+            h.append((k, x, y, w, hh, m))
 
     def _delete(self) -> None:
         """Rule 1 / rule 4 deletions: tentative tracks past their limit, lost ones past re-acquisition."""

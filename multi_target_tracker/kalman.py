@@ -15,8 +15,11 @@ ours, as in DeepSORT / ByteTrack): ``σ_i = acceleration_noise + acceleration_no
 the defaults (measured in ``bench/association.py`` on pedestrians 100-300 px tall and aircraft and
 vehicles 12-140 px) are mostly the size-proportional terms.
 
-All targets live in one :class:`KalmanBank` of stacked arrays (states ``(N, 4)``, covariances
-``(N, 4, 4)``) so that one frame of a thousand targets is a handful of batched matrix products.
+All targets live in one :class:`KalmanBank` of stacked arrays, so a frame of a thousand targets
+is a few vector operations. With F, G, H of eq. 6 and R = r² I the x and y axes never mix and
+have the same noise, so P = diag(P_a, P_a) with one 2x2 block P_a = [[p_pp, p_pv], [p_pv, p_vv]]
+per target (position / velocity of one axis); the bank stores those three numbers, and every
+formula below is eq. 5-6's 4x4 one written for that block (:attr:`KalmanBank.P` rebuilds the 4x4).
 """
 from __future__ import annotations
 
@@ -77,42 +80,34 @@ def process_noise(T: float, sigma) -> np.ndarray:
     return np.multiply.outer(np.square(sigma), G @ G.T)
 
 
-def inverse_2x2(S: np.ndarray) -> np.ndarray:
-    """Inverses of a stack of 2x2 matrices ``(k, 2, 2)`` in closed form (adjugate / determinant)."""
-    a, b, c, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 0], S[:, 1, 1]
-    out = np.empty_like(S)
-    det = a * d - b * c
-    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = d / det, -b / det, -c / det, a / det
-    return out
-
-
 class KalmanBank:
     """The filters of all targets: one row per target in every array."""
 
     def __init__(self, config: KalmanConfig | None = None):
         self.config = config or KalmanConfig()
         self.x = np.zeros((0, 4))        # states [x, Δx, y, Δy], centre [px] and velocity [px/s]
-        self.P = np.zeros((0, 4, 4))     # state covariances
+        self.cov = np.zeros((0, 3))      # per target the block P_a: p_pp, p_pv, p_vv (same for x and y)
         self.size = np.zeros((0, 2))     # smoothed box width and height [px]
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    @property
+    def P(self) -> np.ndarray:
+        """The full 4x4 covariances ``(N, 4, 4)`` of eq. 5's state (for inspection)."""
+        P = np.zeros((len(self.x), 4, 4))
+        for axis in (0, 2):
+            P[:, axis, axis], P[:, axis + 1, axis + 1] = self.cov[:, 0], self.cov[:, 2]
+            P[:, axis, axis + 1] = P[:, axis + 1, axis] = self.cov[:, 1]
+        return P
 
     def measurement_std(self, heights: np.ndarray) -> np.ndarray:
         """r_i [px] for boxes of the given heights."""
         return self.config.measurement_noise + self.config.measurement_noise_per_px * heights
 
-    def R(self, rows=slice(None)) -> np.ndarray:
-        """Measurement noise covariances r_i² I (eq. 5's v_k) of targets ``rows``, ``(k, 2, 2)``."""
-        return np.multiply.outer(self.measurement_std(self.size[rows, 1]) ** 2, np.eye(2))
-
-    def _innovation(self, P: np.ndarray, rows) -> np.ndarray:
-        """S = H P Hᵀ + R for covariances ``P`` of targets ``rows`` (R is diagonal: added in place)."""
-        S = P[:, 0::2, 0::2].copy()
-        r2 = self.measurement_std(self.size[rows, 1]) ** 2
-        S[:, 0, 0] += r2
-        S[:, 1, 1] += r2
-        return S
-
-    def __len__(self) -> int:
-        return len(self.x)
+    def innovation_variance(self, rows=slice(None)) -> np.ndarray:
+        """s_i with S_i = H P_i Hᵀ + R_i = s_i I (``(k,)``, for the update and the Mahalanobis gate)."""
+        return self.cov[rows, 0] + self.measurement_std(self.size[rows, 1]) ** 2
 
     # -- targets in and out -------------------------------------------------------------------
     def add(self, xywh: np.ndarray) -> None:
@@ -122,50 +117,66 @@ class KalmanBank:
         x = np.zeros((k, 4))
         x[:, 0] = xywh[:, 0] + xywh[:, 2] / 2.0
         x[:, 2] = xywh[:, 1] + xywh[:, 3] / 2.0
-        P = np.zeros((k, 4, 4))
-        P[:, 0, 0] = P[:, 2, 2] = self.measurement_std(xywh[:, 3]) ** 2
-        P[:, 1, 1] = P[:, 3, 3] = self.config.initial_velocity_std ** 2
+        cov = np.zeros((k, 3))
+        cov[:, 0] = self.measurement_std(xywh[:, 3]) ** 2            # P = diag(r², σ_v², r², σ_v²)
+        cov[:, 2] = self.config.initial_velocity_std ** 2
         self.x = np.concatenate([self.x, x])
-        self.P = np.concatenate([self.P, P])
+        self.cov = np.concatenate([self.cov, cov])
         self.size = np.concatenate([self.size, xywh[:, 2:4]])
 
     def keep(self, mask: np.ndarray) -> None:
         """Keep only the targets where ``mask`` is True (deletion, §3.3 rule 1)."""
-        self.x, self.P, self.size = self.x[mask], self.P[mask], self.size[mask]
+        self.x, self.cov, self.size = self.x[mask], self.cov[mask], self.size[mask]
 
     # -- the filter ---------------------------------------------------------------------------
     def predict(self, T: float) -> None:
-        """Time update over T seconds: x ← F x, P ← F P Fᵀ + Q (eqs. 5-6)."""
-        F = transition(T)
-        self.x = self.x @ F.T
-        sigma = self.config.acceleration_noise + self.config.acceleration_noise_per_px * self.size[:, 1]
-        self.P = F @ self.P @ F.T + process_noise(T, sigma)
+        """Time update over T seconds: x ← F x, P ← F P Fᵀ + Q (eqs. 5-6).
 
-    def innovation_covariance(self) -> np.ndarray:
-        """S = H P Hᵀ + R for every target, ``(N, 2, 2)`` (for the Mahalanobis gate)."""
-        return self._innovation(self.P, slice(None))
+        Per axis F's block is [[1, T], [0, 1]] and Q's is σ² g gᵀ with g = (T²/2, T), G's column.
+        """
+        self.x[:, 0] += T * self.x[:, 1]
+        self.x[:, 2] += T * self.x[:, 3]
+        q = (self.config.acceleration_noise + self.config.acceleration_noise_per_px * self.size[:, 1]) ** 2
+        pp, pv, vv = self.cov[:, 0], self.cov[:, 1], self.cov[:, 2]
+        self.cov = np.stack([pp + 2 * T * pv + T * T * vv + q * T ** 4 / 4,
+                             pv + T * vv + q * T ** 3 / 2,
+                             vv + q * T * T], axis=1)
 
     def update(self, rows: np.ndarray, z: np.ndarray, sizes: np.ndarray | None = None) -> None:
         """Measurement update of targets ``rows`` with centres ``z`` ``(k, 2)``; smooth their box sizes.
 
-        K = P Hᵀ S⁻¹, x ← x + K (z − H x), P ← (I − K H) P.
+        K = P Hᵀ S⁻¹, x ← x + K (z − H x), P ← (I − K H) P; per axis K = (p_pp, p_pv) / s.
         """
         rows = np.asarray(rows, dtype=np.intp)
         if len(rows) == 0:
             return
-        P = self.P[rows]
-        K = P[:, :, 0::2] @ inverse_2x2(self._innovation(P, rows))  # P Hᵀ S⁻¹, (k, 4, 2)
-        residual = np.asarray(z, dtype=np.float64).reshape(-1, 2) - self.x[rows][:, 0::2]
-        self.x[rows] += (K @ residual[:, :, None])[:, :, 0]
-        self.P[rows] = P - K @ P[:, 0::2, :]                         # (I − K H) P
+        pp, pv, vv = self.cov[rows].T
+        s = self.innovation_variance(rows)
+        k_pos, k_vel = pp / s, pv / s
+        x = self.x[rows]
+        residual = np.asarray(z, dtype=np.float64).reshape(-1, 2) - x[:, 0::2]
+        x[:, 0::2] += k_pos[:, None] * residual
+        x[:, 1::2] += k_vel[:, None] * residual
+        self.x[rows] = x
+        self.cov[rows] = np.stack([pp - k_pos * pp, pv - k_pos * pv, vv - k_vel * pv], axis=1)
         if sizes is not None:
             beta = self.config.size_gain
             self.size[rows] += beta * (np.asarray(sizes, dtype=np.float64).reshape(-1, 2) - self.size[rows])
 
+    def update_frame(self, rows: np.ndarray, z: np.ndarray, sizes: np.ndarray, missed: np.ndarray) -> None:
+        """One frame's updates in one batch: ``rows`` with their detections (§3.3 rule 3) and the
+        ``missed`` targets with their own prediction (rule 1, ``missed_update="prediction"``; their
+        state and size stay, their covariance shrinks) or not at all (``"none"``)."""
+        missed = np.asarray(missed, dtype=np.intp)
+        if self.config.missed_update == "prediction" and len(missed):
+            rows = np.concatenate([np.asarray(rows, dtype=np.intp), missed])
+            z = np.concatenate([np.asarray(z, dtype=np.float64).reshape(-1, 2), self.x[missed][:, 0::2]])
+            sizes = np.concatenate([np.asarray(sizes, dtype=np.float64).reshape(-1, 2), self.size[missed]])
+        self.update(rows, z, sizes)
+
     def coast(self, rows: np.ndarray) -> None:
         """A frame without detection for ``rows`` (§3.3 rule 1): update with the prediction, or nothing."""
-        if self.config.missed_update == "prediction" and len(rows):
-            self.update(rows, self.x[np.asarray(rows, dtype=np.intp)][:, 0::2])
+        self.update_frame(np.zeros(0, dtype=np.intp), np.zeros((0, 2)), np.zeros((0, 2)), rows)
 
     # -- read-outs ----------------------------------------------------------------------------
     @property

@@ -80,7 +80,8 @@ def test_noise_grows_with_box_height():
     bank = KalmanBank(KalmanConfig(measurement_noise=1.0, measurement_noise_per_px=0.1,
                                    acceleration_noise=10.0, acceleration_noise_per_px=2.0))
     bank.add([[0, 0, 10, 10], [0, 0, 10, 100]])
-    np.testing.assert_allclose(bank.R()[:, 0, 0], [(1 + 1) ** 2, (1 + 10) ** 2])
+    np.testing.assert_allclose(bank.measurement_std(bank.size[:, 1]), [1 + 1, 1 + 10])
+    np.testing.assert_allclose(bank.innovation_variance(), [2 * (1 + 1) ** 2, 2 * (1 + 10) ** 2])  # P0 = R
     before = bank.P.copy()
     bank.predict(0.5)
     # velocity variance grows by σ² T² with σ = 10 + 2 h: 30 and 210 px/s²
