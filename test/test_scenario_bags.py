@@ -156,3 +156,17 @@ def test_perfect_tracker_on_a_docking_bag_scores_full_marks(tmp_path):
         abs(np.linalg.det(last.affine[:2, :2])))
     assert r["stop_along_m"] == pytest.approx(depth * (np.sqrt(2) - 1), rel=1e-3)
     assert abs(r["stop_lateral_m"]) < 1e-3
+
+
+def test_evaluate_report_with_strip_and_video_of_a_scene_bag(tmp_path):
+    import cv2
+
+    out = tmp_path / "u.mcap"
+    assert ms.main(["--kind", "uav", "--seed", "3", "--out", str(out), "--frames", "12", "--width", "320",
+                    "--height", "240", "--detections", "--quiet"]) == 0
+    rep = tmp_path / "rep"
+    assert ev.main([str(out), "--report", str(rep), "--video", "--quiet"]) == 0
+    assert (rep / "pr.png").exists() and (rep / "strip.png").stat().st_size > 10_000
+    video = cv2.VideoCapture(str(rep / "annotated.mp4"))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 12
+    assert video.get(cv2.CAP_PROP_FPS) == pytest.approx(25.0, rel=0.01)

@@ -417,37 +417,67 @@ def write_plots(results: dict, folder: str | Path) -> list[Path]:
     return written
 
 
-def write_strip(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, count: int = 6,
-                namespace: str = ""):
-    """Frames of the bag's ``image`` topic with ground truth (green) and outputs (magenta) drawn in."""
+def annotated_frames(output_bag: str | Path, gt_bag: str | Path | None = None, count: int | None = None,
+                     namespace: str = ""):
+    """Yield ``(frame index, image)`` of the bag's ``image`` topic with ground truth (green; hidden
+    targets red) and outputs (magenta: docking polygon, tracks with ids, else detections) drawn in;
+    ``count``: only that many frames, evenly spaced. Yields nothing when neither bag holds images."""
     for source in (p for p in (output_bag, gt_bag) if p is not None):
         reader = BagReader(source)
         image_topic = next(iter(resolve_topics(reader.topics, (IMAGE,), namespace)), None)
         if image_topic is not None:
             break
     else:
-        return None
+        return
     n = reader.topics[image_topic].count
-    wanted = set(np.linspace(0, n - 1, min(count, n)).astype(int).tolist())
-    images = {}
-    for k, item in enumerate(reader.messages([image_topic])):
-        if k in wanted:
-            images[header_stamp_ns(item.data)] = to_bgr8(item.deserialize())
+    wanted = set(np.linspace(0, n - 1, min(count, n)).astype(int).tolist()) if count else None
     outs = read_streams(output_bag, (DOCKING_POLYGON, TRACKS, DETECTIONS), namespace=namespace)
     gts = read_streams(gt_bag or output_bag, (GT_POLYGON, GROUND_TRUTH), namespace=namespace)
-    tiles = []
-    for stamp, image in sorted(images.items()):
-        for streams, color in ((gts, plots.GT_COLOR), (outs, plots.RESULT_COLOR)):
-            quads = [_quad(streams[t].values[stamp]) for t in (GT_POLYGON, DOCKING_POLYGON)
-                     if t in streams and stamp in streams[t].values]
-            tables = [_table(streams[t].values[stamp]) for t in (GROUND_TRUTH, TRACKS)
-                      if t in streams and stamp in streams[t].values]
-            boxes = np.concatenate([_boxes(t) for t in tables]) if tables else ()
-            labels = [int(i) for t in tables for i in (t["id"] if "id" in t.dtype.names else [-1] * len(t))]
-            image = plots.draw_annotations(image, quads=quads, boxes=boxes, color=color,
-                                           labels=labels if tables else None)
-        tiles.append(image)
-    return plots.frame_strip(tiles, path) if tiles else None
+    drawn = ((gts, plots.GT_COLOR, GT_POLYGON, GROUND_TRUTH),
+             (outs, plots.RESULT_COLOR, DOCKING_POLYGON, TRACKS if TRACKS in outs else DETECTIONS))
+    for k, item in enumerate(reader.messages([image_topic])):
+        if wanted is not None and k not in wanted:
+            continue
+        stamp = header_stamp_ns(item.data)
+        image = to_bgr8(item.deserialize())
+        for streams, color, polygon_topic, table_topic in drawn:
+            quads = [_quad(streams[polygon_topic].values[stamp])] \
+                if polygon_topic in streams and stamp in streams[polygon_topic].values else []
+            table = _table(streams[table_topic].values[stamp]) \
+                if table_topic in streams and stamp in streams[table_topic].values else None
+            labels = table["id"].tolist() if table is not None and "id" in table.dtype.names else None
+            hidden = hidden_rows(table, EvaluateConfig()) if table is not None and streams is gts else None
+            image = plots.draw_annotations(image, quads=quads, boxes=_boxes(table) if table is not None else (),
+                                           color=color, labels=labels, hidden=hidden)
+        yield k, image
+
+
+def write_strip(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, count: int = 6,
+                namespace: str = ""):
+    """Six (``count``) annotated frames side by side as a PNG; None when there are no images."""
+    frames = list(annotated_frames(output_bag, gt_bag, count, namespace))
+    return plots.frame_strip([f[1] for f in frames], path, numbers=[f[0] for f in frames]) if frames else None
+
+
+def write_video(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, namespace: str = "",
+                progress: bool = False):
+    """Every annotated frame into an MP4 (OpenCV ``mp4v``) at the bag's image rate; None without images."""
+    writer = None
+    for _, image in tqdm(annotated_frames(output_bag, gt_bag, None, namespace), desc="video",
+                         disable=not progress, unit="frame"):
+        if writer is None:
+            reader = next(r for r in (BagReader(p) for p in (output_bag, gt_bag) if p is not None)
+                          if resolve_topics(r.topics, (IMAGE,), namespace))
+            count = reader.topics[next(iter(resolve_topics(reader.topics, (IMAGE,), namespace)))].count
+            rate = (count - 1) / (reader.duration_ns * 1e-9) if reader.duration_ns > 0 and count > 1 else 10.0
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(min(rate, 120.0)),
+                                     (image.shape[1], image.shape[0]))
+        writer.write(image)
+    if writer is None:
+        return None
+    writer.release()
+    return Path(path)
 
 
 def main(argv=None) -> int:
@@ -457,6 +487,7 @@ def main(argv=None) -> int:
                                      "(default: the ground truth inside each output bag)")
     parser.add_argument("--names", help="comma-separated run names (default: file names)")
     parser.add_argument("--report", help="folder for report.json and the PNG plots")
+    parser.add_argument("--video", action="store_true", help="with --report: also annotated.mp4 of every frame")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_config_arguments(parser, EvaluateConfig)
     args = parser.parse_args(argv)
@@ -487,9 +518,11 @@ def main(argv=None) -> int:
         written = write_plots(results, folder)
         first = args.outputs[0]
         if Path(first).suffix != ".txt":
-            strip = write_strip(first, args.gt if args.gt and Path(args.gt).suffix == ".mcap" else None,
-                                folder / "strip.png", namespace=cfg.namespace)
-            written += [strip] if strip else []
+            gt_bag = args.gt if args.gt and Path(args.gt).suffix == ".mcap" else None
+            strip = write_strip(first, gt_bag, folder / "strip.png", namespace=cfg.namespace)
+            video = write_video(first, gt_bag, folder / "annotated.mp4", cfg.namespace, not args.quiet) \
+                if args.video else None
+            written += [p for p in (strip, video) if p]
         print(f"\nreport: {folder / 'report.json'}" + "".join(f"\n        {p}" for p in written))
     return 0
 

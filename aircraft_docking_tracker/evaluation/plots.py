@@ -155,14 +155,16 @@ def annotate_scene_frame(frame) -> np.ndarray:
     return draw_annotations(frame.image, boxes=table_boxes(gt), labels=gt["id"].tolist(), hidden=(gt["state"] == 2).tolist())
 
 
-def strip_image(frames, tile_width: int = 427, caption: str = "") -> np.ndarray:
-    """Scene frames (annotated with their ground truth) or plain images side by side, frame numbers on top."""
+def strip_image(frames, tile_width: int = 427, caption: str = "", numbers=None) -> np.ndarray:
+    """Scene frames (annotated with their ground truth) or plain images side by side, frame numbers
+    (``numbers``, else the scene frame's index, else the position) on top."""
     tiles = []
     for k, frame in enumerate(frames):
         image = annotate_scene_frame(frame) if hasattr(frame, "image") else np.asarray(frame)
         scale = tile_width / image.shape[1]
         tile = cv2.resize(image, (tile_width, int(round(image.shape[0] * scale))), interpolation=cv2.INTER_AREA)
-        label = f"{caption + ' ' if caption and k == 0 else ''}frame {getattr(frame, 'index', k)}"
+        number = numbers[k] if numbers is not None else getattr(frame, "index", k)
+        label = f"{caption + ' ' if caption and k == 0 else ''}frame {number}"
         cv2.putText(tile, label, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 2, cv2.LINE_AA)
         cv2.putText(tile, label, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
         tiles.append(tile)
@@ -174,9 +176,9 @@ def strip_image(frames, tile_width: int = 427, caption: str = "") -> np.ndarray:
     return np.hstack(tiles)
 
 
-def frame_strip(frames, path: str | Path, tile_width: int = 427) -> Path:
+def frame_strip(frames, path: str | Path, tile_width: int = 427, numbers=None) -> Path:
     """:func:`strip_image` written as a PNG."""
-    return write_image(strip_image(frames, tile_width), path)
+    return write_image(strip_image(frames, tile_width, numbers=numbers), path)
 
 
 def write_image(image: np.ndarray, path: str | Path) -> Path:
