@@ -18,6 +18,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
+from .cli import split_ros_args
 from .bag import BagError, BagReader, get_message_class, ns_to_stamp
 
 
@@ -32,6 +33,7 @@ class PlayOptions:
     remap: dict[str, str] = field(default_factory=dict)
     clock_hz: float = 0.0  # 0: no /clock
     wait_for_subscribers_s: float = 0.0
+    delay_s: float = 0.0  # after the wait: lets every subscriber finish matching (DDS discovery)
 
 
 @dataclass
@@ -106,6 +108,8 @@ class Player:
     def run(self) -> PlayReport:
         if self.options.wait_for_subscribers_s > 0:
             self.wait_for_subscribers(self.options.wait_for_subscribers_s)
+        if self.options.delay_s > 0:
+            self._stop.wait(self.options.delay_s)
         begin = self.reader.start_ns + int(self.options.start_offset_s * 1e9)
         end = begin + int(self.options.duration_s * 1e9) if self.options.duration_s else None
         topics = list(self.publishers)
@@ -159,16 +163,19 @@ def build_parser() -> argparse.ArgumentParser:
                         help="publish /clock (default 100 Hz when given) for nodes with use_sim_time")
     parser.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
                         help="wait up to S seconds for a subscriber on every topic before starting")
+    parser.add_argument("--delay", type=float, default=0.0, metavar="S",
+                        help="then wait S seconds more: a subscriber that has just appeared may not have matched "
+                             "the player yet, and a volatile topic's first messages would miss it")
     return parser
 
 
 def main(args: list[str] | None = None) -> int:
     import rclpy  # noqa: PLC0415
-    from rclpy.utilities import remove_ros_args  # noqa: PLC0415
 
-    argv = sys.argv if args is None else ["mcap_play", *args]
+    argv = sys.argv[1:] if args is None else list(args)
+    own_args, ros_args = split_ros_args(argv)
     parser = build_parser()
-    ns = parser.parse_args(remove_ros_args(argv)[1:])
+    ns = parser.parse_args(own_args)
     try:
         remap = _parse_remaps(ns.remap)
         reader = BagReader(ns.bag)
@@ -180,8 +187,8 @@ def main(args: list[str] | None = None) -> int:
               f"{reader.message_count} readable messages", file=sys.stderr)
     options = PlayOptions(rate=ns.rate, loop=ns.loop, start_offset_s=ns.start, duration_s=ns.duration,
                           topics=ns.topics, exclude=ns.exclude, remap=remap, clock_hz=ns.clock,
-                          wait_for_subscribers_s=ns.wait_for_subscribers)
-    rclpy.init(args=argv)
+                          wait_for_subscribers_s=ns.wait_for_subscribers, delay_s=ns.delay)
+    rclpy.init(args=["mcap_play", *ros_args])
     node = rclpy.create_node("mcap_play")
     try:
         player = Player(node, reader, options)

@@ -19,6 +19,7 @@ import sys
 import threading
 import time
 
+from .cli import split_ros_args
 from .bag import BagError, BagWriter, get_message_class, qos_to_dict, recover
 
 
@@ -127,10 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(args: list[str] | None = None) -> int:
     import rclpy  # noqa: PLC0415
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  # noqa: PLC0415
-    from rclpy.utilities import remove_ros_args  # noqa: PLC0415
 
-    argv = sys.argv if args is None else ["mcap_record", *args]
-    options = build_parser().parse_args(remove_ros_args(argv)[1:])
+    argv = sys.argv[1:] if args is None else list(args)
+    own_args, ros_args = split_ros_args(argv)
+    options = build_parser().parse_args(own_args)
     if options.recover:
         try:
             count = recover(*options.recover)
@@ -146,7 +147,7 @@ def main(args: list[str] | None = None) -> int:
     except BagError as exc:
         print(f"mcap_record: {exc}", file=sys.stderr)
         return 2
-    rclpy.init(args=argv)
+    rclpy.init(args=["mcap_record", *ros_args])
     node = rclpy.create_node("mcap_record")
     recorder = Recorder(node, writer, options.topics or None, options.exclude, options.include_hidden_topics)
     node.create_timer(options.discovery_interval, recorder.discover)

@@ -45,3 +45,12 @@ def test_argparse_bridge_overrides_yaml():
     args = parser.parse_args(["--count", "7"])
     cfg = config_from_arguments(Example, args, base={"rate": 0.1})
     assert (cfg.rate, cfg.count, cfg.mode) == (0.1, 7, "seed")
+
+
+def test_split_ros_args_keeps_tool_remaps_away_from_rcl():
+    from aircraft_docking_tracker.cli import split_ros_args
+
+    own, ros = split_ros_args(["bag.mcap", "--remap", "image:=/cam/image", "--ros-args", "-r", "__ns:=/x",
+                               "-p", "a:=1", "--", "--rate", "2"])
+    assert own == ["bag.mcap", "--remap", "image:=/cam/image", "--rate", "2"]
+    assert ros == ["--ros-args", "-r", "__ns:=/x", "-p", "a:=1"]
