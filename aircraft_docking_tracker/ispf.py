@@ -16,8 +16,13 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   above what the background around it scores; but the best of a hundred tuned particles on pure
   background also stands above a few ring samples, so when the aircraft is hidden the model
   learns the background within one IVT batch and the track is never declared lost (measured in
-  test_docking_logic). The default ``"guarded"`` also requires ``Ŝ >= μ_T - σ_T`` (a result as
-  good as the usual tracked ones, the same bound step 5 aims at); ``"always"`` is the ablation.
+  test_docking_logic). The default ``"guarded"`` also requires ``Ŝ >= update_min_score``, an
+  absolute floor below which a result is not the target's appearance (on the OTB cars and the
+  synthetic docking scenes 99 % of frames score above 0.8; a hidden target about 0.5); ``"always"``
+  is the ablation. Relative floors were measured and dropped: ``μ_T - σ_T`` updated too rarely to
+  follow the aircraft's growth (synthetic docking scene 0: mean polygon IoU 0.44 against 0.59 for
+  the seed's rule) and ``μ_T - 3σ_T`` lets the hidden frames' own low scores widen σ_T until the
+  background is learnt anyway.
 * Resampling (steps 6c and 9): systematic resampling with weights ``exp((S - S_max) / τ)``.
 * The estimate ``X̂_t`` is the best particle (step 7) for both filters.
 * Each particle is tuned by up to ``tune_iterations`` estimator steps, each kept only if it
@@ -69,8 +74,9 @@ class FilterConfig(AppearanceConfig):
     stats_forgetting: float = param(0.95, "forgetting factor of the μ/σ running statistics",
                                     low=0.5, high=0.9999)
     update_rule: str = param("guarded", "conditional update (step 8): guarded = Ŝ > μ_B+σ_B and "
-                             "Ŝ >= μ_T-σ_T; background = Ŝ > μ_B+σ_B only (the seed's); always",
+                             "Ŝ >= update_min_score; background = Ŝ > μ_B+σ_B only (the seed's); always",
                              choices=("guarded", "background", "always"))
+    update_min_score: float = param(0.75, "guarded update: also require Ŝ >= this", low=0.0, high=1.0)
     background_samples: int = param(8, "background states on a ring around X̂ for μ_B, σ_B", low=1, high=64)
     background_offset: float = param(1.0, "ring radius in object sizes (template units)", low=0.3, high=5.0)
     pyramid_ratio: float = param(1.0, "sample from the pyramid level where the target is this many "
@@ -232,7 +238,7 @@ class AffineParticleFilter:
         rule = self.config.update_rule
         updated = rule == "always" or score > self.background_stats.mean + self.background_stats.std
         if rule == "guarded":
-            updated = updated and score >= self.track_stats.mean - self.track_stats.std
+            updated = updated and score >= self.config.update_min_score
         updated = bool(updated)                                           # step 8
         if updated:
             self.model.add(patches[best])
