@@ -214,7 +214,7 @@ def template_grid(width: int, height: int) -> np.ndarray:
     u = (np.arange(width) + 0.5) / width - 0.5
     v = (np.arange(height) + 0.5) / height - 0.5
     uu, vv = np.meshgrid(u, v)
-    return np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)])
+    return np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)]).astype(np.float32)
 
 
 def warp_patches(image: np.ndarray, X: np.ndarray, size: tuple[int, int], level: int = 0,
@@ -229,9 +229,10 @@ def warp_patches(image: np.ndarray, X: np.ndarray, size: tuple[int, int], level:
     w, h = size
     if grid is None:
         grid = template_grid(w, h)
-    pts = X[:, :2, :] @ grid                                    # (N, 2, h*w) edge coordinates
-    pts = pts / (2 ** level) - 0.5                              # -> pixel-centre coords of the level
-    maps = pts.astype(np.float32).reshape(len(X), 2, h, w)
+    # edge coordinates of the level: (x / 2^level) - 0.5 for pixel centres, folded into the matrices
+    A = (X[:, :2, :] / (2 ** level)).astype(np.float32)
+    A[:, :, 2] -= 0.5
+    maps = A @ grid.astype(np.float32, copy=False)                  # (N, 2, h*w)
     map_x = maps[:, 0].reshape(len(X) * h, w)
     map_y = maps[:, 1].reshape(len(X) * h, w)
     if len(X) * h < _REMAP_MAX_ROWS:

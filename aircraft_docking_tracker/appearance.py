@@ -22,6 +22,7 @@ choices made here, in that paper's spirit, are:
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -202,6 +203,7 @@ class PoseEstimator:
         return (self.features(patches) @ self.weights.astype(np.float32)) * self.gain.astype(np.float32)
 
 
+@functools.lru_cache(maxsize=16)
 def _area_matrix(out_size: int, in_size: int) -> np.ndarray:
     """(out, in) matrix averaging ``in`` samples into ``out`` equal bins (area interpolation)."""
     edges = np.linspace(0.0, in_size, out_size + 1)
