@@ -285,11 +285,12 @@ def speed_duel(seq: dict, variant: dict, python: Path | None, rounds: int) -> di
     that a busy spell hits them alike. Returns name -> frames/s.
     """
     best: dict[str, float] = {}
+    repeats = max(1, 400 // seq["n_frames"])            # short sequences: several runs per turn, fastest kept
     for _ in range(rounds):
-        _, seconds = run_ours(seq, variant, 1)
+        _, seconds = run_ours(seq, variant, repeats)
         best["ours (default)"] = max(best.get("ours (default)", 0.0), seq["n_frames"] / seconds)
         for peer in ([] if python is None else PEERS[:3]):
-            _, times = run_peer(python, peer, seq["det"], seq["fps"], seq["n_frames"], 1)
+            _, times = run_peer(python, peer, seq["det"], seq["fps"], seq["n_frames"], repeats)
             best[peer] = max(best.get(peer, 0.0), seq["n_frames"] / float(times.sum()))
     return best
 

@@ -174,8 +174,8 @@ def angles(origins: np.ndarray, velocities: np.ndarray, points: np.ndarray, stil
     speed = np.hypot(velocities[:, 0], velocities[:, 1])
     norms = np.hypot(u[:, 0], u[:, 1]) * speed
     dot = u[:, 0] * velocities[:, 0] + u[:, 1] * velocities[:, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos = np.where(norms > 0, dot / norms, 1.0)
+    cos = dot / np.where(norms > 0, norms, 1.0)        # dot is 0 where a norm is 0: θ = π/2 there ...
+    cos[norms == 0] = 1.0                              # ... so set θ = 0 explicitly
     theta = np.arccos(np.clip(cos, -1.0, 1.0, out=cos))
     theta[speed < still_speed] = 0.0
     return theta

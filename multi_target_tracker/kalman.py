@@ -137,10 +137,10 @@ class KalmanBank:
         self.x[:, 0] += T * self.x[:, 1]
         self.x[:, 2] += T * self.x[:, 3]
         q = (self.config.acceleration_noise + self.config.acceleration_noise_per_px * self.size[:, 1]) ** 2
-        pp, pv, vv = self.cov[:, 0], self.cov[:, 1], self.cov[:, 2]
-        self.cov = np.stack([pp + 2 * T * pv + T * T * vv + q * T ** 4 / 4,
-                             pv + T * vv + q * T ** 3 / 2,
-                             vv + q * T * T], axis=1)
+        pp, pv, vv = self.cov[:, 0], self.cov[:, 1], self.cov[:, 2]      # views: updated in place, in
+        pp += 2 * T * pv + T * T * vv + q * (T ** 4 / 4)                    # this order, each line using
+        pv += T * vv + q * (T ** 3 / 2)                                     # the old values below it
+        vv += q * (T * T)
 
     def update(self, rows: np.ndarray, z: np.ndarray, sizes: np.ndarray | None = None) -> None:
         """Measurement update of targets ``rows`` with centres ``z`` ``(k, 2)``; smooth their box sizes.
@@ -150,15 +150,20 @@ class KalmanBank:
         rows = np.asarray(rows, dtype=np.intp)
         if len(rows) == 0:
             return
-        pp, pv, vv = self.cov[rows].T
-        s = self.innovation_variance(rows)
-        k_pos, k_vel = pp / s, pv / s
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        cov = self.cov[rows]
+        pp, pv, vv = cov[:, 0], cov[:, 1], cov[:, 2]
+        s = pp + self.measurement_std(self.size[rows, 1]) ** 2           # S = s I
+        k_pos, k_vel = (pp / s)[:, None], (pv / s)[:, None]
         x = self.x[rows]
-        residual = np.asarray(z, dtype=np.float64).reshape(-1, 2) - x[:, 0::2]
-        x[:, 0::2] += k_pos[:, None] * residual
-        x[:, 1::2] += k_vel[:, None] * residual
+        residual = z - x[:, 0::2]
+        x[:, 0::2] += k_pos * residual
+        x[:, 1::2] += k_vel * residual
         self.x[rows] = x
-        self.cov[rows] = np.stack([pp - k_pos * pp, pv - k_pos * pv, vv - k_vel * pv], axis=1)
+        vv -= k_vel[:, 0] * pv                                           # (I − K H) P, in the order
+        pv *= 1.0 - k_pos[:, 0]                                          # that reads each old value
+        pp *= 1.0 - k_pos[:, 0]
+        self.cov[rows] = cov
         if sizes is not None:
             beta = self.config.size_gain
             self.size[rows] += beta * (np.asarray(sizes, dtype=np.float64).reshape(-1, 2) - self.size[rows])
@@ -167,11 +172,10 @@ class KalmanBank:
         """One frame's updates in one batch: ``rows`` with their detections (§3.3 rule 3) and the
         ``missed`` targets with their own prediction (rule 1, ``missed_update="prediction"``; their
         state and size stay, their covariance shrinks) or not at all (``"none"``)."""
-        missed = np.asarray(missed, dtype=np.intp)
         if self.config.missed_update == "prediction" and len(missed):
-            rows = np.concatenate([np.asarray(rows, dtype=np.intp), missed])
-            z = np.concatenate([np.asarray(z, dtype=np.float64).reshape(-1, 2), self.x[missed][:, 0::2]])
-            sizes = np.concatenate([np.asarray(sizes, dtype=np.float64).reshape(-1, 2), self.size[missed]])
+            rows = np.concatenate([rows, missed])
+            z = np.concatenate([z, self.x[missed][:, 0::2]])
+            sizes = np.concatenate([sizes, self.size[missed]])
         self.update(rows, z, sizes)
 
     def coast(self, rows: np.ndarray) -> None:

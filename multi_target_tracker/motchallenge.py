@@ -155,8 +155,7 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ih = np.minimum(a[..., 1] + a[..., 3], b[..., 1] + b[..., 3]) - np.maximum(a[..., 1], b[..., 1])
     inter = np.maximum(iw, 0.0) * np.maximum(ih, 0.0)
     union = a[..., 2] * a[..., 3] + b[..., 2] * b[..., 3] - inter
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+    return inter / np.where(union > 0, union, 1.0)       # no area: inter = 0, IoU 0
 
 
 def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
