@@ -95,21 +95,31 @@ def from_mapping(cls: type[T], values: Mapping[str, Any], *, strict: bool = True
 def load_yaml_parameters(path: str | Path, node_name: str | None = None) -> dict[str, Any]:
     """Read a ROS 2 parameter file (``node: {ros__parameters: {...}}``) into a flat dict.
 
-    Takes the section of ``node_name`` (or ``/**``), or the first section when none is given.
+    With ``node_name``, merges every section that applies to that node, as rcl does: ``/**``, then
+    ``/**/node_name``, then ``node_name`` or ``/some/namespace/node_name`` (later ones win).
+    Without, takes the first section.
     """
     data = yaml.safe_load(Path(path).read_text()) or {}
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: not a ROS 2 parameter file")
-    sections = {k.lstrip("/"): v for k, v in data.items()}
-    section = None
-    for key in ([node_name] if node_name else []) + ["**"]:
-        if key in sections:
-            section = sections[key]
-            break
-    if section is None:
-        section = next(iter(sections.values()), {})
-    params = (section or {}).get("ros__parameters", {})
-    return _flatten(params)
+    sections = {str(k).lstrip("/"): (v or {}) for k, v in data.items()}
+    if node_name is None:
+        chosen = [next(iter(sections.values()), {})]
+    else:
+        def rank(key: str) -> int | None:
+            if key == "**":
+                return 0
+            if key == f"**/{node_name}":
+                return 1
+            if key == node_name or key.endswith(f"/{node_name}"):
+                return 2
+            return None
+        matching = sorted((rank(k), k) for k in sections if rank(k) is not None)
+        chosen = [sections[k] for _, k in matching]
+    params: dict[str, Any] = {}
+    for section in chosen:
+        params.update(_flatten(section.get("ros__parameters", {}) or {}))
+    return params
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

@@ -54,3 +54,30 @@ def test_split_ros_args_keeps_tool_remaps_away_from_rcl():
                                "-p", "a:=1", "--", "--rate", "2"])
     assert own == ["bag.mcap", "--remap", "image:=/cam/image", "--rate", "2"]
     assert ros == ["--ros-args", "-r", "__ns:=/x", "-p", "a:=1"]
+
+
+def test_wildcard_sections_merge_like_rcl(tmp_path):
+    path = tmp_path / "setup.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    a: 1\n    b: 1\n"
+                    "/**/detector:\n  ros__parameters:\n    b: 2\n    c: 2\n"
+                    "/cam0/detector:\n  ros__parameters:\n    c: 3\n"
+                    "/**/association:\n  ros__parameters:\n    a: 9\n")
+    assert load_yaml_parameters(path, "detector") == {"a": 1, "b": 2, "c": 3}
+    assert load_yaml_parameters(path, "association") == {"a": 9, "b": 1}
+
+
+def test_every_setup_file_names_only_real_parameters():
+    """config/*_camera.yaml sections must name parameters that the nodes declare."""
+    from aircraft_docking_tracker.config import package_config_dir
+    from aircraft_docking_tracker.offline import processor_spec
+
+    for setup in sorted(package_config_dir().glob("*_camera.yaml")):
+        for node in ("detector", "association", "docking_tracker"):
+            spec = processor_spec(node)
+            known = {prefix + name for prefix, cls in spec.configs.items() for name in cls.__dataclass_fields__}
+            import yaml
+            sections = yaml.safe_load(setup.read_text())
+            if f"/**/{node}" not in sections:
+                continue
+            names = set(load_yaml_parameters(setup, node)) - set(load_yaml_parameters(setup, "__none__"))
+            assert names <= known, f"{setup.name}: unknown {node} parameters {sorted(names - known)}"

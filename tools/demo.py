@@ -1,69 +1,168 @@
-"""`make demo` (provisional until the pipeline lands): record a sample bag live, replay it, show it.
+"""`make demo`: a docking stand camera and a UAV pass, through the three nodes live over ROS 2.
 
-Publishes synthetic frames and detection tables live over ROS 2, records them with mcap_record's
-Recorder, replays the file with mcap_play's Player and reports what arrived.
+1. makes (or reuses) two scenario bags: a docking stand camera and a UAV pass, with ground truth;
+2. starts the nodes as separate processes, the way `ros2 run` does, one camera per namespace:
+   /stand: detector_node -> docking_tracker_node (acquisition from detections);
+   /uav:   detector_node -> association_node;
+   parameters from config/stand_camera.yaml and config/uav_camera.yaml;
+3. records every topic of both cameras and /diagnostics with mcap_record;
+4. plays both bags at once with mcap_play, remapped into the namespaces;
+5. stops everything with SIGINT, scores the recording against the ground truth with the
+   evaluation harness, prints a summary and writes a report folder (tables, plots, image strips).
 """
 from __future__ import annotations
 
 import argparse
-import threading
+import json
+import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import rclpy
-from rclpy.executors import MultiThreadedExecutor
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Image
+REPO = Path(__file__).resolve().parent.parent
+CAMERAS = {
+    # namespace: (scenario kind, seed, scenario options, nodes, set-up file, topics to play)
+    "stand": ("docking", 7, {"frames": 210, "fps": 14.0, "width": 640, "height": 480},
+              ["detector_node", "docking_tracker_node"], "stand_camera.yaml",
+              ["image", "ground_truth/polygon", "ground_truth/nose", "ground_truth/stand"]),
+    "uav": ("uav", 3, {"frames": 240, "fps": 30.0, "width": 640, "height": 480},
+            ["detector_node", "association_node"], "uav_camera.yaml", ["image", "ground_truth"]),
+}
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
-from aircraft_docking_tracker.images import numpy_to_image
-from aircraft_docking_tracker.mcap_play import Player, PlayOptions
-from aircraft_docking_tracker.mcap_record import Recorder
 
-RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+def make_bags(folder: Path) -> dict[str, Path]:
+    """Scenario bags, remade only when their recipe changed."""
+    from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
+    from aircraft_docking_tracker.scenarios.make_scenario import write_docking_bag, write_uav_bag
+    from aircraft_docking_tracker.scenarios.uav import UavScene, UavSceneConfig
+
+    folder.mkdir(parents=True, exist_ok=True)
+    bags = {}
+    for namespace, (kind, seed, options, *_rest) in CAMERAS.items():
+        path = folder / f"{kind}_seed{seed}.mcap"
+        recipe = folder / f"{kind}_seed{seed}.json"
+        wanted = json.dumps({"kind": kind, "seed": seed, **options}, sort_keys=True)
+        if not (path.exists() and recipe.exists() and recipe.read_text() == wanted):
+            print(f"demo: making the {kind} scenario bag ({options['frames']} frames)...", flush=True)
+            if kind == "docking":
+                write_docking_bag(DockingScene(DockingSceneConfig(**options), seed=seed), path, overwrite=True)
+            else:
+                write_uav_bag(UavScene(UavSceneConfig(**options), seed=seed), path, overwrite=True)
+            recipe.write_text(wanted)
+        bags[namespace] = path
+    return bags
+
+
+def run_live(bags: dict[str, Path], out: Path, rate: float) -> Path:
+    from aircraft_docking_tracker.config import package_config_dir
+    from aircraft_docking_tracker.processes import NodeProcess, wait_until
+
+    logs = out / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    recording = out / "recording"
+    if recording.exists():
+        for f in recording.iterdir():
+            f.unlink()
+        recording.rmdir()
+    config_dir = package_config_dir()
+    nodes = [NodeProcess(exe, namespace=ns, params_file=config_dir / setup, log_path=logs / f"{ns}_{exe}.log")
+             for ns, (_, _, _, exes, setup, _) in CAMERAS.items() for exe in exes]
+    recorder = NodeProcess("mcap_record", args=["-a", "-o", recording, "--exclude", "^/(rosout|parameter_events)$"],
+                           log_path=logs / "mcap_record.log")
+    print(f"demo: starting {len(nodes)} nodes and the recorder (logs in {logs})", flush=True)
+    for node in nodes:
+        node.start()
+    recorder.start()
+    try:
+        expected = [f"/{ns}/{t}" for ns, (_, _, _, exes, _, _) in CAMERAS.items()
+                    for t in (["docking/polygon"] if "docking_tracker_node" in exes else ["tracks"])]
+        up = wait_until(lambda: all(f"recording {t}" in (logs / "mcap_record.log").read_text() for t in expected), 60)
+        if not up:
+            raise RuntimeError(f"nodes did not come up in 60 s; see {logs}")
+        players = [NodeProcess("mcap_play", args=[bags[ns], "--rate", rate, "--topics", *topics,
+                                                  "--remap", *[f"{t}:=/{ns}/{t}" for t in topics],
+                                                  "--wait-for-subscribers", "30", "--delay", "2"],
+                               log_path=logs / f"mcap_play_{ns}.log")
+                   for ns, (*_, topics) in CAMERAS.items()]
+        print("demo: playing both bags live...", flush=True)
+        for player in players:
+            player.start()
+        for player in players:
+            player.wait(600)
+        time.sleep(2.0)  # the last frames through the nodes
+    finally:
+        recorder.stop()
+        for node in nodes:
+            node.stop()
+    failed = [n for n in nodes if n.process.returncode not in (0, None)]
+    if failed:
+        print(f"demo: warning: {[n.executable for n in failed]} exited with errors; see {logs}", file=sys.stderr)
+    return recording
+
+
+def diagnostics_summary(recording: Path) -> dict:
+    """The last /diagnostics status of every node: processed, skipped, rejected."""
+    from aircraft_docking_tracker.bag import BagReader
+
+    last = {}
+    for _, msg, _ in BagReader(recording).ros_messages(["/diagnostics"]):
+        for status in msg.status:
+            last[status.hardware_id] = {kv.key: kv.value for kv in status.values}
+    return last
+
+
+def report(recording: Path, bags: dict[str, Path], out: Path) -> dict:
+    from aircraft_docking_tracker.evaluation.evaluate import EvaluateConfig, evaluate_bags, write_plots, write_strip
+    from aircraft_docking_tracker.evaluation.report import format_report, write_json
+
+    folder = out / "report"
+    folder.mkdir(parents=True, exist_ok=True)
+    results, lines = {}, []
+    for namespace in CAMERAS:
+        scores = evaluate_bags(recording, config=EvaluateConfig(namespace=namespace))
+        results[namespace] = scores
+        sub = folder / namespace
+        sub.mkdir(exist_ok=True)
+        write_plots({namespace: scores}, sub)
+        write_strip(recording, None, sub / "strip.png", namespace=namespace)
+        lines += [f"## /{namespace}", "", format_report(scores), ""]
+    results["diagnostics"] = diagnostics_summary(recording)
+    write_json(folder / "summary.json", results)
+    (folder / "summary.md").write_text("\n".join(lines))
+    return results
+
+
+def print_summary(results: dict, out: Path) -> None:
+    stand, uav = results["stand"], results["uav"]
+    sot, mot, det = stand.get("sot", {}), uav.get("mot", {}), uav.get("detection", {})
+    print("\n=== demo summary ===")
+    print(f"stand camera (/stand, docking tracker): {sot.get('frames', '?')} frames, "
+          f"success AUC {sot.get('success_auc', float('nan')):.3f}, precision@20px {sot.get('precision', float('nan')):.3f}")
+    print(f"UAV camera (/uav, detector + association): MOTA {mot.get('mota', float('nan')):.3f}, "
+          f"IDF1 {mot.get('idf1', float('nan')):.3f}, ID switches {mot.get('num_switches', '?')}, "
+          f"detection rate {det.get('detection_rate', float('nan')):.3f}, false alarms {det.get('false_alarm_rate', float('nan')):.3f}")
+    for namespace in CAMERAS:
+        for topic, speed in results[namespace].get("speed", {}).items():
+            if isinstance(speed, dict) and "rate_hz" in speed:
+                print(f"  /{namespace}/{topic}: {speed['rate_hz']:.1f} frames/s, latency p50 "
+                      f"{speed.get('p50_ms', float('nan')):.1f} ms, p95 {speed.get('p95_ms', float('nan')):.1f} ms")
+    for node, values in sorted(results["diagnostics"].items()):
+        print(f"  {node}: processed {values.get('processed')}, skipped {values.get('skipped')}, "
+              f"rejected {values.get('rejected')}")
+    print(f"report: {out / 'report'} (summary.md, summary.json, plots and strips per camera)")
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--out", default="out/demo")
+    parser.add_argument("--out", default="out/demo", help="output folder (bags, recording, report)")
+    parser.add_argument("--rate", default="1.0", help="playback rate of the scenario bags")
     args = parser.parse_args()
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    bag = out / "sample.mcap"
-    if bag.exists():
-        bag.unlink()
-    rclpy.init()
-    executor = MultiThreadedExecutor(num_threads=2)
-    talker, recorder_node = rclpy.create_node("demo_camera"), rclpy.create_node("demo_recorder")
-    executor.add_node(recorder_node)
-    threading.Thread(target=executor.spin, daemon=True).start()
-    writer = BagWriter(bag)
-    recorder = Recorder(recorder_node, writer, topics=["/image"])
-    pub = talker.create_publisher(Image, "/image", RELIABLE)
-    while not recorder.subscriptions:
-        recorder.discover()
-        time.sleep(0.05)
-    while pub.get_subscription_count() == 0:
-        time.sleep(0.05)
-    for i in range(60):
-        frame = np.zeros((240, 320, 3), np.uint8)
-        frame[100:140, 5 * i:5 * i + 40] = (40, 200, 255)
-        msg = numpy_to_image(frame, "bgr8")
-        msg.header.stamp, msg.header.frame_id = ns_to_stamp(talker.get_clock().now().nanoseconds), "camera"
-        pub.publish(msg)
-        time.sleep(1 / 30)
-    time.sleep(0.3)
-    writer.close()
-    reader = BagReader(bag)
-    got = []
-    recorder_node.create_subscription(Image, "/replayed", got.append, RELIABLE)
-    Player(talker, reader, PlayOptions(remap={"/image": "/replayed"}, wait_for_subscribers_s=5.0)).run()
-    time.sleep(0.3)
-    executor.shutdown()
-    rclpy.shutdown()
-    print(reader.describe())
-    print(f"demo: recorded {reader.message_count} frames live, replayed {len(got)}; bag at {bag}")
+    started = time.monotonic()
+    bags = make_bags(out / "bags")
+    recording = run_live(bags, out, float(args.rate))
+    results = report(recording, bags, out)
+    print_summary(results, out)
+    print(f"demo: done in {time.monotonic() - started:.0f} s")
     return 0
 
 

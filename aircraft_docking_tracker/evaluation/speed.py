@@ -11,7 +11,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-LATENCY_PERCENTILES = (50.0, 90.0, 99.0)
+LATENCY_PERCENTILES = (50.0, 95.0, 99.0)
 
 
 def fps(latencies_s) -> float:
@@ -30,7 +30,7 @@ def stream_fps(stamps_ns) -> float:
 
 
 def latency_percentiles(latencies_s, percentiles=LATENCY_PERCENTILES) -> dict:
-    """``{"p50_ms": ..., "p90_ms": ..., "p99_ms": ..., "max_ms": ...}`` of per-frame latencies."""
+    """``{"p50_ms": ..., "p95_ms": ..., "p99_ms": ..., "max_ms": ...}`` of per-frame latencies."""
     lat = np.asarray(latencies_s, dtype=np.float64) * 1e3
     if lat.size == 0:
         return {f"p{p:g}_ms": float("nan") for p in percentiles} | {"max_ms": float("nan")}
