@@ -44,8 +44,10 @@ class DetectorConfig:
     model: str = param(DEFAULT_MODEL, "model file; a bare name is looked up in multi_target_tracker/models")
     scale_factor: float = param(1.2, "pyramid step between window scales", low=1.01, high=3.0)
     stride: int = param(4, "window step in texture-level pixels (one window = 32 px)", choices=(2, 4, 8))
-    min_size: float = param(0.0, "smallest window height searched [px] (0: the model's window)", low=0.0, high=10000.0)
-    max_size: float = param(0.0, "largest window height searched [px] (0: up to the frame)", low=0.0, high=10000.0)
+    min_size: float = param(0.0, "smallest window height searched [px] (0: the range the model was trained "
+                            "for, else its window)", low=0.0, high=10000.0)
+    max_size: float = param(0.0, "largest window height searched [px] (0: the range the model was trained "
+                            "for, else up to the frame)", low=0.0, high=10000.0)
     orientation: str = param("model", "also scan the transposed frame: model (as trained), upright, both",
                              choices=("model", "upright", "both"))
     nms_iou: float = param(0.3, "IoU above which overlapping windows are grouped", low=0.0, high=1.0)
@@ -167,6 +169,9 @@ class Detector:
 
             self.opencv = OpenCVCascade(path)
             self.window = self.opencv.window
+        info = self.cascade.info if self.cascade is not None else {}
+        self.min_size = cfg.min_size or float(info.get("search_min_size", 0.0))
+        self.max_size = cfg.max_size or float(info.get("search_max_size", 0.0))
         orientation = cfg.orientation
         if orientation == "model":
             orientation = "both" if (self.cascade is not None and self.cascade.rotate90) else "upright"
@@ -181,10 +186,10 @@ class Detector:
         for view, transposed in views:
             if self.cascade is not None:
                 boxes, scores, _ = scan_cascade(view, self.cascade, cfg.scale_factor, cfg.stride,
-                                                cfg.min_size, cfg.max_size, margin)
+                                                self.min_size, self.max_size, margin)
             else:
                 boxes, scores = self.opencv.detect(view, cfg.scale_factor, cfg.min_neighbors,
-                                                   cfg.min_size, cfg.max_size)
+                                                   self.min_size, self.max_size)
             if transposed:
                 boxes = boxes[:, [1, 0, 3, 2]]
             all_boxes.append(boxes)
