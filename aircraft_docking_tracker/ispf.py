@@ -8,8 +8,10 @@ adds particles only while the best similarity is still below ``μ_T - σ_T`` (st
 
 Choices the seed leaves open (Li et al. 2012 define them; named here):
 
-* ``μ_T, σ_T``: exponentially forgetting mean / standard deviation of the accepted scores
-  ``Ŝ_t`` of past frames (forgetting ``stats_forgetting``); initialised with the start patch.
+* ``μ_T, σ_T``: exponentially forgetting mean / standard deviation of the scores ``Ŝ_t`` of
+  past frames (forgetting ``stats_forgetting``); initialised with the start patch's score.
+* Constants: the seed gives no value for any of them (nor for ``N_total``, ``ΔN_0``,
+  ``α_inc``, ``a``, ``Σ_g``); the defaults are ours, IVT's where IVT has one, chosen on OTB Car4.
 * ``μ_B, σ_B``: the same statistics of the similarity of ``background_samples`` states placed
   on a ring one object size (``background_offset``) around ``X̂_t``. The seed's condition
   ``Ŝ > μ_B + σ_B`` (``update_rule="background"``) updates the model whenever the result stands
