@@ -67,12 +67,9 @@ class Stage:
     right: np.ndarray
     threshold: float
 
-    def score(self, passes: Callable[[int, int], np.ndarray], n: int) -> np.ndarray:
-        """Stage sum for ``n`` samples; ``passes(feature, t)`` says where ``v'_feature >= t``."""
-        total = np.zeros(n)
-        for f, t, lo, hi in zip(self.features, self.thresholds, self.left, self.right):
-            total += np.where(passes(int(f), int(t)), hi, lo)
-        return total
+    def score(self, passes: np.ndarray) -> np.ndarray:
+        """Stage sums from ``passes`` (n samples x k stumps: ``v'_feature >= t`` per stump)."""
+        return np.where(passes, self.right[None, :], self.left[None, :]).sum(axis=1)
 
     def to_dict(self) -> dict:
         return {"threshold": float(self.threshold), "features": [int(f) for f in self.features],
@@ -102,9 +99,10 @@ class Cascade:
     rotate90: bool = False          # also look for the object turned by 90 degrees (trained that way)
     info: dict = field(default_factory=dict)
 
-    def evaluate(self, passes: Callable[[int, int, np.ndarray], np.ndarray], n: int,
+    def evaluate(self, passes: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray], n: int,
                  last_stage_margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        """Run the cascade on ``n`` samples; ``passes(feature, t, idx)`` tests ``v' >= t`` on samples ``idx``.
+        """Run the cascade on ``n`` samples; ``passes(features, thresholds, idx)`` tests ``v' >= t`` for
+        every stump of a stage on samples ``idx`` (an ``len(idx) x k`` boolean array).
 
         Returns ``(idx, score)`` of the samples that pass: score = last stage sum - its threshold,
         which must reach ``last_stage_margin`` (0 is the trained cascade; below 0 widens a PR curve).
@@ -112,7 +110,7 @@ class Cascade:
         idx = np.arange(n)
         score = np.zeros(n)
         for k, stage in enumerate(self.stages):
-            total = stage.score(lambda f, t: passes(f, t, idx), len(idx))
+            total = stage.score(passes(stage.features, stage.thresholds, idx))
             score = total - stage.threshold
             keep = score >= (last_stage_margin if k == len(self.stages) - 1 else 0.0)
             idx, score = idx[keep], score[keep]
@@ -125,7 +123,7 @@ class Cascade:
         x = np.asarray(x)
         if x.ndim != 2 or x.shape[1] != FUSED_DIM:
             raise CascadeError(f"expected N x {FUSED_DIM} feature vectors, got {x.shape}")
-        return self.evaluate(lambda f, t, idx: x[idx, f] >= t, len(x), last_stage_margin)
+        return self.evaluate(lambda f, t, idx: x[idx][:, f] >= t[None, :], len(x), last_stage_margin)
 
     @property
     def n_stumps(self) -> int:

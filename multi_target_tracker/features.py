@@ -232,27 +232,40 @@ class LevelScan:
         self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
         self._y0, self._x0 = y0, x0
 
-    def raw(self, feature: int, windows: np.ndarray) -> np.ndarray:
-        """Raw (un-normalised, integer) value of one fused-vector feature for the given windows."""
-        r, c = np.divmod(windows, self.cols)
-        if feature < LBP_DIM:
-            block, code = divmod(feature, N_CODES)
-            dy, dx = BLOCK_OFFSETS[block]
-            s = self.stride
-            return self.blocks[r + dy // s, c + dx // s, code].astype(np.int64)
-        k = feature - LBP_DIM
-        if k < CONTOUR_SIZE:
-            return self.px[r, self._x0[c] + k].astype(np.int64)
-        return self.py[self._y0[r] + k - CONTOUR_SIZE, c].astype(np.int64)
+    def raw(self, features: np.ndarray, windows: np.ndarray) -> np.ndarray:
+        """Raw (un-normalised, integer) values ``(n windows, k features)`` of fused-vector features."""
+        features = np.asarray(features, np.int64)
+        r, c = np.divmod(np.asarray(windows, np.int64), self.cols)
+        r, c = r[:, None], c[:, None]
+        out = np.zeros((len(r), len(features)), np.int64)
+        s = self.stride
+        lbp = features < LBP_DIM
+        if lbp.any():
+            block, code = np.divmod(features[lbp], N_CODES)
+            offsets = np.asarray(BLOCK_OFFSETS)[block] // s
+            out[:, lbp] = self.blocks[r + offsets[:, 0], c + offsets[:, 1], code]
+        k = features - LBP_DIM
+        along_x, along_y = (k >= 0) & (k < CONTOUR_SIZE), k >= CONTOUR_SIZE
+        if along_x.any():
+            out[:, along_x] = self.px[r, self._x0[c] + k[along_x]]
+        if along_y.any():
+            out[:, along_y] = self.py[self._y0[r] + k[along_y] - CONTOUR_SIZE, c]
+        return out
 
-    def maximum(self, feature: int, windows: np.ndarray) -> np.ndarray:
-        """The eq. 3 or eq. 4 maximum of the part that ``feature`` belongs to."""
-        return (self.m_lbp if feature < LBP_DIM else self.m_contour)[windows]
+    def maxima(self, features: np.ndarray, windows: np.ndarray) -> np.ndarray:
+        """The eq. 3 or eq. 4 maximum of the part each feature belongs to, ``(n windows, k features)``."""
+        lbp = np.asarray(features) < LBP_DIM
+        out = np.zeros((len(windows), len(lbp)), np.int64)
+        if lbp.any():
+            out[:, lbp] = self.m_lbp[windows][:, None]
+        if (~lbp).any():
+            out[:, ~lbp] = self.m_contour[windows][:, None]
+        return out
 
-    def passes(self, feature: int, threshold: int, windows: np.ndarray) -> np.ndarray:
-        """Exact ``255 * v_k / max >= threshold`` for the given windows (False where max is 0)."""
-        m = self.maximum(feature, windows)
-        return (255 * self.raw(feature, windows) >= threshold * m) & (m > 0)
+    def passes(self, features: np.ndarray, thresholds: np.ndarray, windows: np.ndarray) -> np.ndarray:
+        """Exact ``255 * v_k / max >= t_k``, ``(n windows, k features)`` (False where max is 0)."""
+        m = self.maxima(features, windows)
+        return (255 * self.raw(features, windows) >= np.asarray(thresholds, np.int64)[None, :] * m) & (m > 0)
 
     def vectors(self, windows: np.ndarray) -> np.ndarray:
         """Full normalised 1152-d vectors (uint8, floored) of some windows, for training."""

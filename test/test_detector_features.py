@@ -68,9 +68,10 @@ def test_level_scan_equals_reference_window_by_window(stride):
         y, x = y * stride, x * stride
         ref = F.window_features(gl[y:y + 34, x:x + 34], gc[2 * y + 1:2 * y + 67, 2 * x + 1:2 * x + 67], 12.0)
         assert np.array_equal(F.quantised(ref), vec)
-    for feature in (7, 255 + 256 * 3, 1024 + 10, 1024 + 100):
-        for t in (1, 64, 200):
-            assert np.array_equal(scan.passes(feature, t, windows), vectors[:, feature] >= t)
+    features = np.array([7, 255 + 256 * 3, 1024 + 10, 1024 + 100, 3, 1151])
+    for t in (1, 64, 200):
+        thresholds = np.full(len(features), t)
+        assert np.array_equal(scan.passes(features, thresholds, windows), vectors[:, features] >= t)
 
 
 def test_feature_sets_and_bad_input():
