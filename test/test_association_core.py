@@ -255,3 +255,11 @@ def test_trail_records_history():
     np.testing.assert_allclose(trail[:, 0], [3, 4, 5])
     assert trail[-1, 0] == 5 and trail[-1, 5] == 1.0
     assert len(tracker.trail(99)) == 0
+
+
+def test_empty_frames_coast_then_delete():
+    tracker = MultiTargetTracker(seed_config(confirm_length=2, max_misses=2), KALMAN)
+    run(tracker, [three_targets(k) for k in range(3)])
+    states = [tracker.step((3 + k) / FPS, np.zeros((0, 4))).tracks.states.tolist() for k in range(3)]
+    assert states[0] == [COASTING] * 3 and states[1] == [COASTING] * 3
+    assert states[2] == []                                      # 3 misses > f_t = 2: all deleted
