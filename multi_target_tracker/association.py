@@ -92,7 +92,7 @@ class AssociationConfig:
     gate: str = param("mahalanobis", "acceptance: 'cost' is c_ij <= c_t (seed rule 2); 'mahalanobis' is "
                       "d² <= mahalanobis_gate with normalisation over the gated pairs only",
                       choices=("cost", "mahalanobis"))
-    mahalanobis_gate: float = param(9.21, "χ² threshold of the Mahalanobis gate (2 dof; 9.21 = 99 %)",
+    mahalanobis_gate: float = param(9.21, "χ² threshold of the Mahalanobis gate (2 dof; 9.21: 99 per cent of true pairs pass)",
                                     low=0.0, high=1e6)
     iou_weight: float = param(3.0, "weight of (1 - IoU) of predicted box and detection added to the cost",
                               low=0.0, high=100.0)

@@ -34,3 +34,12 @@ def test_mot_track_seed_preset_options(tmp_path, capsys):
 
 def test_mot_track_missing_file(tmp_path):
     assert main([str(tmp_path / "nope.txt")]) == 2
+
+
+def test_mot_track_help_lists_every_parameter(capsys):
+    import pytest
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    assert "--mahalanobis-gate" in out and "--kalman-measurement-noise-per-px" in out and "--backfill" in out
