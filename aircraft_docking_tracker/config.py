@@ -152,13 +152,14 @@ def add_config_arguments(parser, cls: type, prefix: str = "") -> None:
         spec = spec_of(f)
         default = getattr(cls(), f.name)
         opt = "--" + (prefix + f.name).replace("_", "-")
+        description = spec.description.replace("%", "%%")  # argparse formats help with %
         kind = type(default)
         if isinstance(default, bool):
             parser.add_argument(opt, type=lambda s: s.lower() in ("1", "true", "yes", "on"), default=None,
-                                metavar="BOOL", help=f"{spec.description} (default {default})")
+                                metavar="BOOL", help=f"{description} (default {default})")
         elif kind in (int, float, str):
             parser.add_argument(opt, type=kind, default=None, choices=spec.choices,
-                                help=f"{spec.description} (default {default})")
+                                help=f"{description} (default {default})")
 
 
 def config_from_arguments(cls: type[T], args, prefix: str = "", base: Mapping[str, Any] | None = None) -> T:

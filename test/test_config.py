@@ -81,3 +81,25 @@ def test_every_setup_file_names_only_real_parameters():
                 continue
             names = set(load_yaml_parameters(setup, node)) - set(load_yaml_parameters(setup, "__none__"))
             assert names <= known, f"{setup.name}: unknown {node} parameters {sorted(names - known)}"
+
+
+def test_percent_in_a_description_does_not_break_help():
+    @dataclass
+    class WithPercent:
+        gate: float = param(9.21, "chi-square threshold (99 % of mass)", low=0.0)
+
+    parser = argparse.ArgumentParser()
+    add_config_arguments(parser, WithPercent)
+    assert "99 % of mass" in parser.format_help()
+
+
+def test_seed_preset_is_the_seed_configuration():
+    from aircraft_docking_tracker.config import package_config_dir
+    from aircraft_docking_tracker.offline import processor_spec
+    from multi_target_tracker.association import seed_config
+
+    spec = processor_spec("association")
+    configs = spec.configs_from_parameters(load_yaml_parameters(package_config_dir() / "association_seed.yaml",
+                                                                "association"))
+    assert configs[""] == seed_config()
+    assert configs["kalman."].acceleration_noise_per_px == 0.0
