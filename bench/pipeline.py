@@ -26,6 +26,7 @@ import json
 import os
 import platform
 import re
+import subprocess
 import sys
 import tempfile
 import threading
@@ -69,7 +70,7 @@ class Settings:
     quick: bool
     rates: tuple = (10, 30, 60)
     sizes: tuple = ((640, 480), (1280, 720))
-    stream_s: float = 20.0            # per latency cell
+    stream_s: float = 10.0            # per latency cell
     distinct_frames: int = 40         # rendered frames per size, published in a cycle
     loop_s: float = 600.0             # memory: replay loop length
     loop_bag_frames: int = 250        # frames of the looped bag (25 fps)
@@ -83,8 +84,35 @@ class Settings:
     def make(cls, quick: bool) -> "Settings":
         if not quick:
             return cls(quick=False)
-        return cls(quick=True, stream_s=6.0, distinct_frames=20, loop_s=75.0, loop_bag_frames=100,
+        return cls(quick=True, stream_s=4.0, distinct_frames=20, loop_s=60.0, loop_bag_frames=100,
                    rss_every_s=2.5, restart_after_s=6.0, restart_down_s=2.0, restart_tail_s=8.0, fault_repeats=2)
+
+
+# Fast DDS profile giving shared memory segments that hold a 1280x720 bgr8 image (the default 512 KB
+# segment does not: such images go over UDP in fragments, and best-effort loses them under load).
+SHM_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <transport_descriptors>
+    <transport_descriptor><transport_id>shm_large</transport_id><type>SHM</type>
+      <segment_size>33554432</segment_size></transport_descriptor>
+    <transport_descriptor><transport_id>udp</transport_id><type>UDPv4</type></transport_descriptor>
+  </transport_descriptors>
+  <participant profile_name="bench_shm_large" is_default_profile="true">
+    <rtps>
+      <userTransports><transport_id>shm_large</transport_id><transport_id>udp</transport_id></userTransports>
+      <useBuiltinTransports>false</useBuiltinTransports>
+    </rtps>
+  </participant>
+</profiles>
+"""
+
+
+def use_transport(name: str, log_dir: Path) -> None:
+    """``default``: what a user gets; ``shm``: SHM_PROFILE for this process and every node it starts."""
+    if name == "shm":
+        path = log_dir / "fastdds_shm_large.xml"
+        path.write_text(SHM_PROFILE)
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(path)
 
 
 # ---------------------------------------------------------------------------------- shared helpers
@@ -278,6 +306,9 @@ PIPELINES = {  # name -> (image topic, output topic, output type, nodes whose di
 }
 
 
+STATE_KEYS = ("docking state", "track starts", "tracks published", "detections last frame")
+
+
 def docking_init(probe: Probe, size: tuple[int, int]) -> None:
     """Start the docking track on a central box (2-point docking/init): it tracks, not waits."""
     msg = get_message_class(POLYGON)()
@@ -323,7 +354,8 @@ def measure_latency(probe: Probe, settings: Settings, log_dir: Path) -> list[dic
                                  "lost_in_transport": sent - head["received"] - head["skipped"],
                                  "outputs": len(got), "latency_ms": percentiles(got),
                                  "processing_ms_p50": {n: after[f].get("processing_ms_p50") for n, f in zip(reported, fqns)},
-                                 "nodes": deltas, "alive": all(nodes.running(n) for n in reported)})
+                                 "nodes": deltas, "alive": all(nodes.running(n) for n in reported),
+                                 "state": {k: after[f][k] for f in fqns for k in STATE_KEYS if k in after[f]}})
                     print(f"latency {pipeline} {size} {rate} Hz: {rows[-1]['latency_ms']} "
                           f"in {rows[-1]['in_node']} skipped {head['skipped']} out {len(got)}", flush=True)
     return rows
@@ -401,11 +433,13 @@ def measure_restart(probe: Probe, settings: Settings, log_dir: Path, bag: Path) 
         association = nodes.procs["association"]
         stopped_at = probe.now_ns()
         exit_code = association.stop()
+        stop_s = (probe.now_ns() - stopped_at) / 1e9
         time.sleep(settings.restart_down_s)
         association.log_path = log_dir / "association_restarted.log"
+        started_at = probe.now_ns()
         association.start()
-        resumed = wait_until(lambda: tracks[-1][0] > stopped_at + settings.restart_down_s * 1e9, 60)
-        resumed_after_s = (tracks[-1][0] - stopped_at) / 1e9 if resumed else None
+        resumed = wait_until(lambda: tracks[-1][0] > started_at, 60)
+        resumed_after_s = (tracks[-1][0] - started_at) / 1e9 if resumed else None
         time.sleep(settings.restart_tail_s)
         nodes.procs["player"].stop()
         time.sleep(1.0)
@@ -420,8 +454,8 @@ def measure_restart(probe: Probe, settings: Settings, log_dir: Path, bag: Path) 
     gap_from, gap_to = largest_gap(log_times["/rs/tracks"])
     missing = sum(gap_from < t < gap_to for t in log_times["/rs/detections"])
     out = {"association_exit_code_on_stop": exit_code, "recorder_exit_code": recorder_exit,
-           "resumed": bool(resumed), "first_tracks_after_stop_s": None if resumed_after_s is None else round(resumed_after_s, 2),
-           "down_s": settings.restart_down_s, "recording_truncated": reader.truncated,
+           "stop_took_s": round(stop_s, 2), "down_s": settings.restart_down_s, "resumed": bool(resumed),
+           "first_tracks_after_start_s": None if resumed_after_s is None else round(resumed_after_s, 2), "recording_truncated": reader.truncated,
            "recording_messages": counts, "recording_index_count": reader.message_count,
            "tracks_gap_s": round((gap_to - gap_from) / 1e9, 2), "detections_without_tracks": missing,
            "tracks_after_restart": sum(t > gap_to for t in log_times["/rs/tracks"]), "alive_after": alive}
@@ -553,7 +587,8 @@ def measure_faults(probe: Probe, settings: Settings, log_dir: Path) -> list[dict
             if code is not None:
                 rows.append({"node": name, "fault": "(process exited)", "exit_code": code, "alive": False,
                              "log_tail": nodes.log(name)[-1500:]})
-    return rows
+    order = list(specs)
+    return sorted(rows, key=lambda r: order.index(r["node"]))  # stable: each node's faults in sending order
 
 
 # ---------------------------------------------------------------------------------- report
@@ -561,6 +596,10 @@ def md_table(header: list[str], rows: list[list]) -> list[str]:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join("" if v is None else str(v) for v in row) + " |" for row in rows]
     return lines
+
+
+def latency_rows(results: dict) -> list[dict]:
+    return results.get("latency", []) + results.get("latency_shm", [])
 
 
 def markdown(results: dict) -> str:
@@ -573,13 +612,17 @@ def markdown(results: dict) -> str:
            "### End-to-end latency (image stamp at publish → output received)", "",
            f"Images published from the bench process for {s['stream_s']} s per row (rendered scenario frames), "
            "stamped with the wall clock; `in node` = handled + skipped (keep-newest slot), `lost` = published "
-           "but never reached the node (best-effort transport).", ""]
-    out += md_table(["pipeline", "size", "Hz in", "published", "in node", "handled", "skipped", "lost", "outputs",
-                     "p50 ms", "p95 ms", "p99 ms", "processing p50 ms"],
-                    [[r["pipeline"], r["size"], r["rate_hz"], r["published"], r["in_node"], r["handled"], r["skipped"],
-                      r["lost_in_transport"], r["outputs"], r["latency_ms"]["p50"], r["latency_ms"]["p95"],
-                      r["latency_ms"]["p99"], ", ".join(f"{k} {v}" for k, v in r["processing_ms_p50"].items())]
-                     for r in results["latency"]])
+           "but never reached the node (best-effort transport). Transport `default` is Fast DDS as installed "
+           "(shared memory segments of 512 KB: larger images go over UDP in fragments); `shm` gives it 32 MB "
+           "segments (`SHM_PROFILE` in this script, via `FASTDDS_DEFAULT_PROFILES_FILE`).", ""]
+    out += md_table(["transport", "pipeline", "size", "Hz in", "published", "in node", "handled", "skipped", "lost",
+                     "outputs", "p50 ms", "p95 ms", "p99 ms", "processing p50 ms", "state at end"],
+                    [[r.get("transport", "default"), r["pipeline"], r["size"], r["rate_hz"], r["published"],
+                      r["in_node"], r["handled"], r["skipped"], r["lost_in_transport"], r["outputs"],
+                      r["latency_ms"]["p50"], r["latency_ms"]["p95"], r["latency_ms"]["p99"],
+                      ", ".join(f"{k} {v}" for k, v in r["processing_ms_p50"].items()),
+                      ", ".join(f"{k}: {v}" for k, v in r.get("state", {}).items())]
+                     for r in latency_rows(results)])
     m = results["memory"]
     out += ["", f"### Memory over a {m['duration_s']:.0f} s replay loop (`mcap_play --loop`, {m['bag_frames']} frames "
             f"at 25 Hz, ~{m['passes']} passes)", ""]
@@ -604,19 +647,23 @@ def plot(results: dict) -> None:
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
     PLOTS.mkdir(parents=True, exist_ok=True)
-    rows = results["latency"]
-    fig, axes = plt.subplots(1, len(PIPELINES), figsize=(12, 4), sharey=True)
-    for ax, pipeline in zip(np.atleast_1d(axes), PIPELINES):
-        mine = [r for r in rows if r["pipeline"] == pipeline]
-        labels = [f"{r['size']}\n{r['rate_hz']} Hz" for r in mine]
-        x = np.arange(len(mine))
-        for i, q in enumerate(("p50", "p95", "p99")):
-            ax.bar(x + (i - 1) * 0.27, [r["latency_ms"][q] or 0 for r in mine], 0.27, label=q)
-        ax.set_xticks(x, labels, fontsize=7)
-        ax.set_title(pipeline, fontsize=9)
-        ax.set_yscale("log")
-    np.atleast_1d(axes)[0].set_ylabel("stamp → output latency [ms]")
-    np.atleast_1d(axes)[0].legend()
+    rows = latency_rows(results)
+    transports = sorted({r.get("transport", "default") for r in rows})
+    fig, axes = plt.subplots(len(transports), len(PIPELINES), figsize=(12, 3.6 * len(transports)), sharey=True,
+                             squeeze=False)
+    for row_axes, transport in zip(axes, transports):
+        for ax, pipeline in zip(row_axes, PIPELINES):
+            mine = [r for r in rows if r["pipeline"] == pipeline and r.get("transport", "default") == transport]
+            x = np.arange(len(mine))
+            for i, q in enumerate(("p50", "p95", "p99")):
+                ax.bar(x + (i - 1) * 0.27, [r["latency_ms"][q] or 0 for r in mine], 0.27, label=q)
+            ax.set_xticks(x, [f"{r['size']}\n{r['rate_hz']} Hz\n{r['handled']}/{r['published']}" for r in mine],
+                          fontsize=7)
+            ax.set_title(f"{pipeline}, transport {transport}", fontsize=9)
+            ax.set_yscale("log")
+        row_axes[0].set_ylabel("stamp → output [ms]")
+    axes[0][0].legend(fontsize=8)
+    fig.text(0.5, 0.005, "x: size, input rate, frames handled / published", ha="center", fontsize=8)
     fig.tight_layout()
     fig.savefig(PLOTS / "pipeline_latency.png", dpi=110)
     plt.close(fig)
@@ -634,44 +681,58 @@ def plot(results: dict) -> None:
     plt.close(fig)
 
 
+def measure(args, settings: Settings, log_dir: Path) -> dict:
+    """The wanted measurements in this process (one transport); returns them by name."""
+    wanted = args.only or ["latency", "memory", "restart", "faults"]
+    out = {}
+    probe = Probe()
+    try:
+        bag = uav_bag(log_dir / "loop.mcap", settings.loop_bag_frames) if {"memory", "restart"} & set(wanted) else None
+        if "latency" in wanted:
+            rows = measure_latency(probe, settings, log_dir)
+            out["latency" if args.transport == "default" else "latency_shm"] = [
+                {"transport": args.transport, **r} for r in rows]
+        if "memory" in wanted:
+            out["memory"] = measure_memory(probe, settings, log_dir, bag)
+        if "restart" in wanted:
+            out["restart"] = measure_restart(probe, settings, log_dir, bag)
+        if "faults" in wanted:
+            out["faults"] = measure_faults(probe, settings, log_dir)
+    finally:
+        probe.close()
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="short runs (a few minutes)")
     parser.add_argument("--only", nargs="+", choices=["latency", "memory", "restart", "faults"], default=None)
+    parser.add_argument("--transport", choices=["default", "shm"], default="default",
+                        help="shm: Fast DDS shared memory segments large enough for 1280x720 images")
     args = parser.parse_args()
     settings = Settings.make(args.quick)
-    wanted = set(args.only or ["latency", "memory", "restart", "faults"])
     RESULTS.mkdir(parents=True, exist_ok=True)
     log_dir = Path(tempfile.mkdtemp(prefix="bench_pipeline_"))
+    use_transport(args.transport, log_dir)
     print(f"logs and bags in {log_dir}; ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}", flush=True)
-    results = {"settings": {k: v for k, v in vars(settings).items()}, "domain_id": os.environ["ROS_DOMAIN_ID"],
-               "machine": f"{platform.machine()}, {os.cpu_count()} cores", "log_dir": str(log_dir),
-               "detector_model": detector_parameters().get("model")}
-    previous = RESULTS / "pipeline.json"
-    if args.only and previous.exists():  # keep the other measurements of the last run
-        results = {**json.loads(previous.read_text()), **{k: v for k, v in results.items() if k != "settings"}}
-    probe = Probe()
+    json_path = RESULTS / "pipeline.json"
+    results = json.loads(json_path.read_text()) if args.only and json_path.exists() else {}  # keep the others
+    results.update({"settings": vars(settings), "domain_id": os.environ["ROS_DOMAIN_ID"],
+                    "machine": f"{platform.machine()}, {os.cpu_count()} cores", "log_dir": str(log_dir),
+                    "detector_model": detector_parameters().get("model")})
     started = time.monotonic()
-    try:
-        bag = None
-        if wanted & {"memory", "restart"}:
-            bag = uav_bag(log_dir / "loop.mcap", settings.loop_bag_frames)
-        if "latency" in wanted:
-            results["latency"] = measure_latency(probe, settings, log_dir)
-        if "memory" in wanted:
-            results["memory"] = measure_memory(probe, settings, log_dir, bag)
-        if "restart" in wanted:
-            results["restart"] = measure_restart(probe, settings, log_dir, bag)
-        if "faults" in wanted:
-            results["faults"] = measure_faults(probe, settings, log_dir)
-    finally:
-        probe.close()
+    results.update(measure(args, settings, log_dir))
     results["elapsed_s"] = round(time.monotonic() - started, 1)
-    previous.write_text(json.dumps(results, indent=1, default=str))
+    json_path.write_text(json.dumps(results, indent=1, default=str))
+    if args.only is None and args.transport == "default":
+        # Fast DDS reads its profile once per process: the shm latency rows come from a child run
+        subprocess.run([sys.executable, __file__, "--only", "latency", "--transport", "shm",
+                        *(["--quick"] if args.quick else [])], check=False)
+        results = json.loads(json_path.read_text())
     if all(k in results for k in ("latency", "memory", "restart", "faults")):
         (RESULTS / "pipeline.md").write_text(markdown(results))
         plot(results)
-    print(f"done in {results['elapsed_s']} s: {RESULTS / 'pipeline.md'}", flush=True)
+    print(f"done in {time.monotonic() - started:.0f} s: {RESULTS / 'pipeline.md'}", flush=True)
     return 0
 
 
