@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import re
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -67,7 +68,8 @@ class ProcessingStats:
         self._events.append((time.monotonic(), processing_s, age_s))
 
     def reject(self, reason: str) -> None:
-        self.rejected[reason] += 1
+        """Count a rejection under its kind (numbers folded, see ``_reason_key``)."""
+        self.rejected[_reason_key(reason)] += 1
 
     @property
     def rejected_total(self) -> int:
@@ -120,13 +122,13 @@ def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: Pr
         outputs = processor.process(topic, msg)
     except ValueError as exc:
         reason = f"{topic}: {exc}"
-        stats.reject(_reason_key(reason))
+        stats.reject(reason)
         if on_error:
             on_error(reason)
         return []
     except Exception as exc:  # a bug must not take the node or the recording down
         reason = f"{topic}: internal error {type(exc).__name__}: {exc}"
-        stats.reject(_reason_key(reason))
+        stats.reject(reason)
         LOG.error("%s\n%s", reason, traceback.format_exc())
         if on_error:
             on_error(reason)
@@ -138,33 +140,11 @@ def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: Pr
     return outputs
 
 
+_NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
+
+
 def _reason_key(reason: str, limit: int = 120) -> str:
-    """Reasons are counted by kind: cut numbers-heavy tails so the counter stays small."""
-    return reason if len(reason) <= limit else reason[:limit] + "..."
-
-
-@dataclass(frozen=True)
-class ProcessorSpec:
-    """How to build a node's processor: what the live node and the offline runner both use.
-
-    ``configs`` maps a parameter prefix ("" or e.g. "kalman.") to a config dataclass; ``build``
-    takes the validated configs by prefix and returns the processor. The node declares each config
-    as ROS parameters; the offline runner reads them from the same ``config/*.yaml`` section
-    (``node_name``).
-    """
-
-    node_name: str
-    configs: dict[str, type]
-    build: Callable[[dict[str, Any]], MessageProcessor]
-
-    def configs_from_parameters(self, parameters: dict[str, Any]) -> dict[str, Any]:
-        """Validated configs from a flat parameter dict (``load_yaml_parameters`` output)."""
-        from .config import from_mapping  # noqa: PLC0415
-
-        out = {}
-        for prefix, cls in self.configs.items():
-            names = {f for f in cls.__dataclass_fields__}
-            values = {k[len(prefix):]: v for k, v in parameters.items()
-                      if k.startswith(prefix) and k[len(prefix):] in names}
-            out[prefix] = from_mapping(cls, values)
-        return out
+    """Reasons are counted by kind: numbers become ``#`` so that a camera sending frames truncated
+    to varying lengths adds to one counter, not one key per length (memory stays bounded)."""
+    key = _NUMBER.sub("#", reason)
+    return key if len(key) <= limit else key[:limit] + "..."

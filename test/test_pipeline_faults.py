@@ -29,3 +29,10 @@ def test_rejection_reasons_are_counted_by_kind_not_by_number():
     assert stats.rejected_total == 1000
     # one kind of fault: a handful of keys at most, not one per distinct byte count
     assert len(stats.rejected) <= 10, f"{len(stats.rejected)} distinct reason keys for one kind of fault"
+
+
+def test_node_level_rejections_are_folded_too():
+    stats = ProcessingStats()
+    for n in range(1, 500):
+        stats.reject(f"detections: {n} invalid rows (NaN, inf or size <= 0) dropped")
+    assert list(stats.rejected) == ["detections: # invalid rows (NaN, inf or size <= #) dropped"]
