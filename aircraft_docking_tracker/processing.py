@@ -148,3 +148,30 @@ def _reason_key(reason: str, limit: int = 120) -> str:
     to varying lengths adds to one counter, not one key per length (memory stays bounded)."""
     key = _NUMBER.sub("#", reason)
     return key if len(key) <= limit else key[:limit] + "..."
+
+
+@dataclass(frozen=True)
+class ProcessorSpec:
+    """How to build a node's processor: what the live node and the offline runner both use.
+
+    ``configs`` maps a parameter prefix ("" or e.g. "kalman.") to a config dataclass; ``build``
+    takes the validated configs by prefix and returns the processor. The node declares each config
+    as ROS parameters; the offline runner reads them from the same ``config/*.yaml`` section
+    (``node_name``).
+    """
+
+    node_name: str
+    configs: dict[str, type]
+    build: Callable[[dict[str, Any]], MessageProcessor]
+
+    def configs_from_parameters(self, parameters: dict[str, Any]) -> dict[str, Any]:
+        """Validated configs from a flat parameter dict (``load_yaml_parameters`` output)."""
+        from .config import from_mapping  # noqa: PLC0415
+
+        out = {}
+        for prefix, cls in self.configs.items():
+            names = {f for f in cls.__dataclass_fields__}
+            values = {k[len(prefix):]: v for k, v in parameters.items()
+                      if k.startswith(prefix) and k[len(prefix):] in names}
+            out[prefix] = from_mapping(cls, values)
+        return out

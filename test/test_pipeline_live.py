@@ -19,7 +19,7 @@ pytestmark = pytest.mark.ros
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
     folder = tmp_path_factory.mktemp("scenes")
-    return {"uav": uav_bag(folder / "uav.mcap"), "docking": docking_bag(folder / "docking.mcap")}
+    return {"uav": uav_bag(folder / "uav.mcap"), "docking": docking_bag(folder / "docking.mcap", frames=60)}
 
 
 def test_association_live_equals_offline_and_tracks_the_scene(scenes, tmp_path):
@@ -47,9 +47,9 @@ def test_docking_tracker_live_follows_the_aircraft(scenes, tmp_path):
         [lambda ctx: DockingTrackerNode(context=ctx, namespace="dock",
                                         parameter_overrides=[Parameter("initial_box", value=box)])],
         scenes["docking"], live, "dock", record_topics=["image", "docking/polygon", "docking/state", "ground_truth/polygon"],
-        play_topics=["image", "ground_truth/polygon"], rate=0.5)
+        play_topics=["image", "ground_truth/polygon"], rate=0.25)  # ~3.5 frames/s: no frame skipped on a busy machine
     stats = nodes[0].stats
-    assert stats.rejected_total == 0 and stats.processed >= 0.8 * report.published / 2
+    assert stats.rejected_total == 0 and stats.processed >= 0.9 * report.published / 2, stats
     scores = evaluate_bags(live, config=EvaluateConfig(namespace="dock"))
     assert scores["sot"]["success_auc"] > 0.5, scores["sot"]
     assert scores["sot"]["precision_px"] == 20 and scores["sot"]["precision"] > 0.7, scores["sot"]

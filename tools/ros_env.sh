@@ -19,6 +19,14 @@ export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 export RMW_IMPLEMENTATION="${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}"
 export ROS_LOG_DIR="${ROS_LOG_DIR:-${TMPDIR:-/tmp}/aircraft_docking_tracker-ros-log}"
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+# Shared-memory segments large enough for camera images (config/fastdds_large_images.xml explains).
+if [ -z "${FASTDDS_DEFAULT_PROFILES_FILE:-}" ] && [ -z "${FASTRTPS_DEFAULT_PROFILES_FILE:-}" ]; then
+  _adt_xml="$(cd "$(dirname "${BASH_SOURCE[0]:-$0}")/.." && pwd)/config/fastdds_large_images.xml"
+  if [ -f "$_adt_xml" ]; then
+    export FASTDDS_DEFAULT_PROFILES_FILE="$_adt_xml" FASTRTPS_DEFAULT_PROFILES_FILE="$_adt_xml"
+  fi
+  unset _adt_xml
+fi
 export MPLBACKEND="${MPLBACKEND:-Agg}"
 export PYTHONUNBUFFERED=1
 case ":$PATH:" in
