@@ -223,6 +223,7 @@ class PerceptionNode(Node):
         values = {
             "rate_hz": f"{summary['rate_hz']:.2f}",
             "processing_ms_p50": f"{summary['processing_ms_p50']:.2f}",
+            "processing_ms_p95": f"{summary['processing_ms_p95']:.2f}",
             "processing_ms_max": f"{summary['processing_ms_max']:.2f}",
             "latency_ms_p50": f"{summary['latency_ms_p50']:.2f}",
             "received": str(self.stats.received),

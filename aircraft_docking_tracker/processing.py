@@ -76,17 +76,20 @@ class ProcessingStats:
         return sum(self.rejected.values())
 
     def summary(self) -> dict[str, float]:
-        """Rate (Hz) and latency percentiles (ms) over the last ``window_s`` seconds."""
+        """Rate (Hz) over the last ``window_s`` seconds; processing time and stamp latency (ms)
+        percentiles over the last 2000 processed messages."""
         now = time.monotonic()
+        out = {"rate_hz": 0.0, "processing_ms_p50": 0.0, "processing_ms_p95": 0.0, "processing_ms_max": 0.0,
+               "latency_ms_p50": 0.0}
         recent = [e for e in self._events if now - e[0] <= self.window_s]
-        out = {"rate_hz": 0.0, "processing_ms_p50": 0.0, "processing_ms_max": 0.0, "latency_ms_p50": 0.0}
-        if recent:
-            span = max(now - recent[0][0], 1e-3)
-            out["rate_hz"] = len(recent) / max(span, self.window_s if len(recent) < 2 else span)
-            proc = sorted(e[1] * 1e3 for e in recent)
+        if len(recent) >= 2:
+            out["rate_hz"] = (len(recent) - 1) / max(recent[-1][0] - recent[0][0], 1e-3)
+        if self._events:
+            proc = sorted(e[1] * 1e3 for e in self._events)
             out["processing_ms_p50"] = proc[len(proc) // 2]
+            out["processing_ms_p95"] = proc[min(len(proc) - 1, int(0.95 * len(proc)))]
             out["processing_ms_max"] = proc[-1]
-            ages = sorted(e[2] * 1e3 for e in recent if e[2] is not None)
+            ages = sorted(e[2] * 1e3 for e in self._events if e[2] is not None)
             if ages:
                 out["latency_ms_p50"] = ages[len(ages) // 2]
         return out
