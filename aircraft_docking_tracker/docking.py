@@ -8,7 +8,10 @@ all day must settle what happens before the aircraft appears and when the track 
   or from the best ``detections`` row of class ``detection_class`` scoring at least
   ``min_detection_score``.
 * **tracking** (state 0): the filter runs every frame. When its score ``Ŝ_t`` stays below
-  ``lost_score`` for ``lost_after`` consecutive frames, the track is declared lost.
+  ``lost_score`` for ``lost_after`` consecutive frames, the track is declared lost. The default
+  0.75 is the filter's update floor: tracked targets score above 0.8 in 99 % of the frames of
+  the OTB cars and the synthetic scenes, a hidden one about 0.5, and a track whose box has
+  drifted off (measured: OTB Car4, one seed in five, the scale running away) about 0.71.
 * **lost** (state 1): the filter keeps running where it was (the aircraft may come back from behind
   a vehicle) and the track is reported again after ``recover_after`` consecutive frames at or
   above ``lost_score``; meanwhile a detection of the aircraft class restarts the filter on it
@@ -40,7 +43,7 @@ class DockingConfig(FilterConfig):
 
     initial_box: list = param([], "initial box x, y, w, h [px, top-left corner]; empty: wait for "
                               "docking/init or a detection")
-    lost_score: float = param(0.55, "a frame whose best similarity Ŝ is below this counts as low",
+    lost_score: float = param(0.75, "a frame whose best similarity Ŝ is below this counts as low",
                               low=0.0, high=1.0)
     lost_after: int = param(10, "consecutive low frames before the track is declared lost", low=1, high=10000)
     recover_after: int = param(5, "consecutive good frames for a lost track to be reported again",
