@@ -88,31 +88,23 @@ class Settings:
                    rss_every_s=2.5, restart_after_s=6.0, restart_down_s=2.0, restart_tail_s=8.0, fault_repeats=2)
 
 
-# Fast DDS profile giving shared memory segments that hold a 1280x720 bgr8 image (the default 512 KB
-# segment does not: such images go over UDP in fragments, and best-effort loses them under load).
-SHM_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
-<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
-  <transport_descriptors>
-    <transport_descriptor><transport_id>shm_large</transport_id><type>SHM</type>
-      <segment_size>33554432</segment_size></transport_descriptor>
-    <transport_descriptor><transport_id>udp</transport_id><type>UDPv4</type></transport_descriptor>
-  </transport_descriptors>
-  <participant profile_name="bench_shm_large" is_default_profile="true">
-    <rtps>
-      <userTransports><transport_id>shm_large</transport_id><transport_id>udp</transport_id></userTransports>
-      <useBuiltinTransports>false</useBuiltinTransports>
-    </rtps>
-  </participant>
-</profiles>
-"""
+# Transports: "profile" is what every make command uses (tools/ros_env.sh sets the shipped
+# config/fastdds_large_images.xml: 32 MB shared-memory segments); "builtin" is Fast DDS with no profile
+# (512 KB segments: larger images go over UDP in fragments, and best-effort loses them under load).
+TRANSPORTS = ("profile", "builtin")
+PROFILE_VARS = ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE")
 
 
-def use_transport(name: str, log_dir: Path) -> None:
-    """``default``: what a user gets; ``shm``: SHM_PROFILE for this process and every node it starts."""
-    if name == "shm":
-        path = log_dir / "fastdds_shm_large.xml"
-        path.write_text(SHM_PROFILE)
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(path)
+def use_transport(name: str) -> str:
+    """Set this process's (and its nodes') Fast DDS profile; returns what was used."""
+    for var in PROFILE_VARS:
+        os.environ.pop(var, None)
+    if name == "builtin":
+        return "Fast DDS built-in transports (no profile)"
+    path = package_config_dir() / "fastdds_large_images.xml"
+    for var in PROFILE_VARS:
+        os.environ[var] = str(path)
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 # ---------------------------------------------------------------------------------- shared helpers
@@ -615,7 +607,7 @@ def md_table(header: list[str], rows: list[list]) -> list[str]:
 
 
 def latency_rows(results: dict) -> list[dict]:
-    return results.get("latency", []) + results.get("latency_shm", [])
+    return results.get("latency", []) + results.get("latency_builtin", [])
 
 
 def markdown(results: dict) -> str:
@@ -628,12 +620,12 @@ def markdown(results: dict) -> str:
            "### End-to-end latency (image stamp at publish → output received)", "",
            f"Images published from the bench process for {s['stream_s']} s per row (rendered scenario frames), "
            "stamped with the wall clock; `in node` = handled + skipped (keep-newest slot), `lost` = published "
-           "but never reached the node (best-effort transport). Transport `default` is Fast DDS as installed "
-           "(shared memory segments of 512 KB: larger images go over UDP in fragments); `shm` gives it 32 MB "
-           "segments (`SHM_PROFILE` in this script, via `FASTDDS_DEFAULT_PROFILES_FILE`).", ""]
+           "but never reached the node (best-effort transport). Transport `profile`: the shipped "
+           "`config/fastdds_large_images.xml` (32 MB shared-memory segments), as every make command sets it; "
+           "`builtin`: Fast DDS without a profile (512 KB segments: larger images go over UDP in fragments).", ""]
     out += md_table(["transport", "pipeline", "size", "Hz in", "published", "in node", "handled", "skipped", "lost",
                      "outputs", "p50 ms", "p95 ms", "p99 ms", "processing p50 ms", "state at end"],
-                    [[r.get("transport", "default"), r["pipeline"], r["size"], r["rate_hz"], r["published"],
+                    [[r.get("transport", "profile"), r["pipeline"], r["size"], r["rate_hz"], r["published"],
                       r["in_node"], r["handled"], r["skipped"], r["lost_in_transport"], r["outputs"],
                       r["latency_ms"]["p50"], r["latency_ms"]["p95"], r["latency_ms"]["p99"],
                       ", ".join(f"{k} {v}" for k, v in r["processing_ms_p50"].items()),
@@ -664,12 +656,12 @@ def plot(results: dict) -> None:
 
     PLOTS.mkdir(parents=True, exist_ok=True)
     rows = latency_rows(results)
-    transports = sorted({r.get("transport", "default") for r in rows})
+    transports = sorted({r.get("transport", "profile") for r in rows})
     fig, axes = plt.subplots(len(transports), len(PIPELINES), figsize=(12, 3.6 * len(transports)), sharey=True,
                              squeeze=False)
     for row_axes, transport in zip(axes, transports):
         for ax, pipeline in zip(row_axes, PIPELINES):
-            mine = [r for r in rows if r["pipeline"] == pipeline and r.get("transport", "default") == transport]
+            mine = [r for r in rows if r["pipeline"] == pipeline and r.get("transport", "profile") == transport]
             x = np.arange(len(mine))
             for i, q in enumerate(("p50", "p95", "p99")):
                 ax.bar(x + (i - 1) * 0.27, [r["latency_ms"][q] or 0 for r in mine], 0.27, label=q)
@@ -706,7 +698,7 @@ def measure(args, settings: Settings, log_dir: Path) -> dict:
         bag = uav_bag(log_dir / "loop.mcap", settings.loop_bag_frames) if {"memory", "restart"} & set(wanted) else None
         if "latency" in wanted:
             rows = measure_latency(probe, settings, log_dir)
-            out["latency" if args.transport == "default" else "latency_shm"] = [
+            out["latency" if args.transport == "profile" else "latency_builtin"] = [
                 {"transport": args.transport, **r} for r in rows]
         if "memory" in wanted:
             out["memory"] = measure_memory(probe, settings, log_dir, bag)
@@ -723,26 +715,27 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="short runs (a few minutes)")
     parser.add_argument("--only", nargs="+", choices=["latency", "memory", "restart", "faults"], default=None)
-    parser.add_argument("--transport", choices=["default", "shm"], default="default",
-                        help="shm: Fast DDS shared memory segments large enough for 1280x720 images")
+    parser.add_argument("--transport", choices=TRANSPORTS, default="profile",
+                        help="profile: the shipped Fast DDS profile (as make sets it); builtin: Fast DDS defaults")
     args = parser.parse_args()
     settings = Settings.make(args.quick)
     RESULTS.mkdir(parents=True, exist_ok=True)
     log_dir = Path(tempfile.mkdtemp(prefix="bench_pipeline_"))
-    use_transport(args.transport, log_dir)
+    transport = use_transport(args.transport)
     print(f"logs and bags in {log_dir}; ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}", flush=True)
     json_path = RESULTS / "pipeline.json"
     results = json.loads(json_path.read_text()) if args.only and json_path.exists() else {}  # keep the others
     results.update({"settings": vars(settings), "domain_id": os.environ["ROS_DOMAIN_ID"],
                     "machine": f"{platform.machine()}, {os.cpu_count()} cores", "log_dir": str(log_dir),
-                    "detector_model": detector_parameters().get("model", DetectorConfig().model)})
+                    "detector_model": detector_parameters().get("model", DetectorConfig().model),
+                    f"transport_{args.transport}": transport})
     started = time.monotonic()
     results.update(measure(args, settings, log_dir))
     results["elapsed_s"] = round(time.monotonic() - started, 1)
     json_path.write_text(json.dumps(results, indent=1, default=str))
-    if args.only is None and args.transport == "default":
-        # Fast DDS reads its profile once per process: the shm latency rows come from a child run
-        subprocess.run([sys.executable, __file__, "--only", "latency", "--transport", "shm",
+    if args.only is None and args.transport == "profile":
+        # Fast DDS reads its profile once per process: the built-in transport rows come from a child run
+        subprocess.run([sys.executable, __file__, "--only", "latency", "--transport", "builtin",
                         *(["--quick"] if args.quick else [])], check=False)
         results = json.loads(json_path.read_text())
     if all(k in results for k in ("latency", "memory", "restart", "faults")):
