@@ -387,6 +387,20 @@ def fit_slope_mb_per_min(samples: list[tuple[float, float]]) -> float | None:
     return round(float(np.polyfit(t / 60.0, mb, 1)[0]), 3)
 
 
+def rss_summary(series: list[tuple[float, float]], duration_s: float) -> dict:
+    """Start / end / max RSS and slopes: of every sample, after a 20 % warm-up, and of the floor (the
+    smallest sample of each tenth of the run: a frame's working memory comes and goes, a leak stays)."""
+    warm = [s for s in series if s[0] >= 0.2 * duration_s]
+    bins = np.minimum((np.array([t for t, _ in series]) / duration_s * 10).astype(int), 9)
+    floor = [min((s for s, b in zip(series, bins) if b == k), key=lambda s: s[1]) for k in sorted(set(bins))]
+    return {"rss_start_mb": round(series[0][1], 1), "rss_end_mb": round(series[-1][1], 1),
+            "rss_max_mb": round(max(m for _, m in series), 1),
+            "rss_floor_first_mb": round(floor[0][1], 1), "rss_floor_last_mb": round(floor[-1][1], 1),
+            "slope_mb_per_min": fit_slope_mb_per_min(series),
+            "slope_after_warmup_mb_per_min": fit_slope_mb_per_min(warm),
+            "floor_slope_after_warmup_mb_per_min": fit_slope_mb_per_min([f for f in floor if f[0] >= 0.2 * duration_s])}
+
+
 def measure_memory(probe: Probe, settings: Settings, log_dir: Path, bag: Path) -> dict:
     specs = {"detector": node("detector_node", "loop", **detector_parameters()),
              "association": node("association_node", "loop"),
@@ -408,14 +422,9 @@ def measure_memory(probe: Probe, settings: Settings, log_dir: Path, bag: Path) -
            "passes": round(settings.loop_s * 25.0 / settings.loop_bag_frames, 1), "tracks_received": len(tracks),
            "alive": alive, "nodes": {}}
     for name, series in samples.items():
-        warm = [s for s in series if s[0] >= 0.2 * settings.loop_s]  # after warm-up (imports, first allocations)
-        out["nodes"][name] = {
-            "rss_start_mb": round(series[0][1], 1), "rss_end_mb": round(series[-1][1], 1),
-            "rss_max_mb": round(max(m for _, m in series), 1),
-            "slope_mb_per_min": fit_slope_mb_per_min(series), "slope_after_warmup_mb_per_min": fit_slope_mb_per_min(warm),
-            "time_jumps": as_int(diag[name].get("time_jumps")), "processed": as_int(diag[name].get("processed")),
-            "skipped": as_int(diag[name].get("skipped")), "rejected": as_int(diag[name].get("rejected")),
-            "samples": [(round(t, 1), round(m, 2)) for t, m in series]}
+        out["nodes"][name] = {**rss_summary(series, settings.loop_s),
+                              **{k: as_int(diag[name].get(k)) for k in ("time_jumps", "processed", "skipped", "rejected")},
+                              "samples": [(round(t, 1), round(m, 2)) for t, m in series]}
     print(f"memory: {json.dumps({k: {kk: vv for kk, vv in v.items() if kk != 'samples'} for k, v in out['nodes'].items()})}",
           flush=True)
     return out
@@ -634,11 +643,15 @@ def markdown(results: dict) -> str:
     m = results["memory"]
     out += ["", f"### Memory over a {m['duration_s']:.0f} s replay loop (`mcap_play --loop`, {m['bag_frames']} frames "
             f"at 25 Hz, ~{m['passes']} passes)", ""]
-    out += md_table(["node", "RSS start MB", "RSS end MB", "RSS max MB", "slope MB/min", "slope after warm-up MB/min",
-                     "time jumps", "processed", "skipped", "rejected", "alive"],
-                    [[n, v["rss_start_mb"], v["rss_end_mb"], v["rss_max_mb"], v["slope_mb_per_min"],
-                      v["slope_after_warmup_mb_per_min"], v["time_jumps"], v["processed"], v["skipped"], v["rejected"],
-                      m["alive"][n]] for n, v in m["nodes"].items()])
+    out += md_table(["node", "RSS start MB", "RSS end MB", "RSS max MB", "floor first / last tenth MB",
+                     "slope MB/min", "after warm-up", "floor after warm-up", "time jumps", "processed", "skipped",
+                     "rejected", "alive"],
+                    [[n, v["rss_start_mb"], v["rss_end_mb"], v["rss_max_mb"],
+                      f"{v.get('rss_floor_first_mb')} / {v.get('rss_floor_last_mb')}", v["slope_mb_per_min"],
+                      v["slope_after_warmup_mb_per_min"], v.get("floor_slope_after_warmup_mb_per_min"), v["time_jumps"],
+                      v["processed"], v["skipped"], v["rejected"], m["alive"][n]] for n, v in m["nodes"].items()])
+    out += ["", "Floor: the smallest RSS sample of each tenth of the run (a frame's working memory comes and goes; "
+            "a leak raises the floor). Slopes are least-squares fits over the samples (warm-up: first 20 %)."]
     r = results["restart"]
     out += ["", "### association_node restarted mid-stream (player and `mcap_record` running)", ""]
     out += md_table(["measure", "value"], [[k, v] for k, v in r.items()])
@@ -679,7 +692,7 @@ def plot(results: dict) -> None:
     fig, ax = plt.subplots(figsize=(7, 4))
     for name, v in results["memory"]["nodes"].items():
         t, mb = np.array(v["samples"]).T
-        ax.plot(t / 60.0, mb, label=f"{name} ({v['slope_after_warmup_mb_per_min']} MB/min after warm-up)")
+        ax.plot(t / 60.0, mb, label=f"{name} (floor {v.get('floor_slope_after_warmup_mb_per_min')} MB/min after warm-up)")
     ax.set_xlabel("minutes of replay loop")
     ax.set_ylabel("RSS [MB]")
     ax.set_title(f"RSS under mcap_play --loop ({results['memory']['passes']} passes)")
