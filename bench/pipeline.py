@@ -108,14 +108,14 @@ def use_transport(name: str) -> str:
 
 
 # ---------------------------------------------------------------------------------- shared helpers
-FALLBACK_MODEL = "uav_vehicles_fused.json"  # shipped in multi_target_tracker/models
+UAV_MODEL = "uav_vehicles_fused.json"  # config/uav_camera.yaml's model, shipped in multi_target_tracker/models
 def detector_parameters() -> dict:
-    """Detector parameters: the configured model if installed, else the package's UAV model, else an
-    OpenCV Haar cascade shipped with cv2 (the bench still measures the pipeline; see ``detector_model``)."""
-    for model in (DetectorConfig().model, FALLBACK_MODEL):
+    """The UAV set-up's model (config/uav_camera.yaml: the frames are UAV scenes) if shipped, else the
+    configured default, else an OpenCV Haar cascade shipped with cv2 (the bench still measures the pipeline)."""
+    for model in (UAV_MODEL, DetectorConfig().model):
         try:
             resolve_model(model)
-            return {} if model == DetectorConfig().model else {"model": model}
+            return {"model": model}
         except DetectorError:
             continue
     import cv2  # noqa: PLC0415
@@ -625,7 +625,7 @@ def markdown(results: dict) -> str:
     out = ["## Pipeline: load and faults (`bench/pipeline.py`)", "",
            f"Nodes as separate processes (`NodeProcess`, like `ros2 run`), DDS domain {results['domain_id']}, "
            f"{'quick' if s['quick'] else 'full'} run on {results['machine']} (2 shared cores: noisy). "
-           f"Detector model: {model}.", "",
+           f"Detector model: {model}.", *results.get("notes", []), "",
            "### End-to-end latency (image stamp at publish → output received)", "",
            f"Images published from the bench process for {s['stream_s']} s per row (rendered scenario frames), "
            "stamped with the wall clock; `in node` = handled + skipped (keep-newest slot), `lost` = published "
@@ -712,7 +712,7 @@ def measure(args, settings: Settings, log_dir: Path) -> dict:
         if "latency" in wanted:
             rows = measure_latency(probe, settings, log_dir)
             out["latency" if args.transport == "profile" else "latency_builtin"] = [
-                {"transport": args.transport, **r} for r in rows]
+                {"transport": args.transport, "detector_model": detector_parameters()["model"], **r} for r in rows]
         if "memory" in wanted:
             out["memory"] = measure_memory(probe, settings, log_dir, bag)
         if "restart" in wanted:
@@ -740,7 +740,7 @@ def main() -> int:
     results = json.loads(json_path.read_text()) if args.only and json_path.exists() else {}  # keep the others
     results.update({"settings": vars(settings), "domain_id": os.environ["ROS_DOMAIN_ID"],
                     "machine": f"{platform.machine()}, {os.cpu_count()} cores", "log_dir": str(log_dir),
-                    "detector_model": detector_parameters().get("model", DetectorConfig().model),
+                    "detector_model": detector_parameters()["model"],
                     f"transport_{args.transport}": transport})
     started = time.monotonic()
     results.update(measure(args, settings, log_dir))
