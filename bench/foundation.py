@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Image, PointCloud2
@@ -74,7 +74,7 @@ def bench_offline_writers(tmp: Path, n: int) -> dict:
 def bench_live_recording(tmp: Path, rate_hz: float, seconds: float) -> dict:
     """Publish 640x480 frames at ``rate_hz`` to a Recorder in the same process; MB/s and share kept."""
     rclpy.init()
-    executor = MultiThreadedExecutor(num_threads=2)
+    executor = SingleThreadedExecutor()
     talker, rec_node = rclpy.create_node("bench_talker"), rclpy.create_node("bench_recorder")
     executor.add_node(rec_node)
     writer = BagWriter(tmp / f"live_{rate_hz:g}.mcap")
@@ -123,7 +123,7 @@ def make_replay_bag(path: Path, seconds: float) -> None:
 
 def bench_replay(path: Path, rate: float) -> dict:
     rclpy.init()
-    executor = MultiThreadedExecutor(num_threads=2)
+    executor = SingleThreadedExecutor()
     listener, player_node = rclpy.create_node("bench_listener"), rclpy.create_node("bench_player")
     executor.add_node(listener)
     arrivals = []

@@ -19,13 +19,14 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="short runs (each area in a minute or two)")
     parser.add_argument("--only", nargs="+", default=None, help="areas to run (default: all)")
+    parser.add_argument("--gather", action="store_true", help="run nothing: rebuild bench/README.md from the results")
     args = parser.parse_args()
     areas = [a for a in ORDER if (BENCH / f"{a}.py").exists()]
     areas += sorted(p.stem for p in BENCH.glob("*.py") if p.stem not in ORDER and p.stem != "run_all" and not p.stem.startswith("_"))
     if args.only:
         areas = [a for a in areas if a in args.only]
     failed = []
-    for area in areas:
+    for area in ([] if args.gather else areas):
         started = time.monotonic()
         print(f"=== bench/{area}.py", flush=True)
         cmd = [sys.executable, str(BENCH / f"{area}.py")] + (["--quick"] if args.quick else [])

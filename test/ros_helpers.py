@@ -6,7 +6,7 @@ import time
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 
 
 @contextlib.contextmanager
@@ -17,7 +17,7 @@ def ros_context(domain_id: int | None = None):
     if domain_id is not None:
         kwargs["domain_id"] = domain_id
     rclpy.init(**kwargs)
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor = SingleThreadedExecutor(context=context)
     try:
         yield context, executor
     finally:
