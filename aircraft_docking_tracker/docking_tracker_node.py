@@ -172,9 +172,7 @@ SPEC = ProcessorSpec(NODE_NAME, {"": DockingConfig, NODE_PREFIX: DockingNodeConf
 class DockingTrackerNode(PerceptionNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        config = self.declare_config(DockingConfig)
-        node = self.declare_config(DockingNodeConfig, prefix=NODE_PREFIX)
-        self.attach_processor(DockingProcessor(config, node))
+        self.attach_spec(SPEC)
 
     def on_config_changed(self, cfg) -> None:
         if isinstance(cfg, DockingConfig):

@@ -5,8 +5,7 @@ A node is thin::
     class DetectorNode(PerceptionNode):
         def __init__(self, **kwargs):
             super().__init__("detector", **kwargs)
-            config = self.declare_config(DetectorConfig)        # ROS parameters with ranges
-            self.attach_processor(DetectorProcessor(config))    # topics, QoS, publishing
+            self.attach_spec(SPEC)   # ROS parameters with ranges from SPEC's configs; topics, QoS
 
         def on_config_changed(self, config):                     # a parameter was set at runtime
             self.processor.configure(config)
@@ -162,9 +161,16 @@ class PerceptionNode(Node):
                 self.on_config_changed(cfg)
 
     # ------------------------------------------------------------------ processing
+    def attach_spec(self, spec) -> MessageProcessor:
+        """Declare every config of a ``processing.ProcessorSpec`` and attach the processor it builds:
+        the same construction ``run_offline`` uses, so live and offline cannot drift apart."""
+        configs = {prefix: self.declare_config(cls, prefix) for prefix, cls in spec.configs.items()}
+        return self.attach_processor(spec.build(configs))
+
     def attach_processor(self, processor: MessageProcessor) -> MessageProcessor:
         """Subscribe to the processor's inputs and publish its outputs (see module docstring)."""
         self.processor = processor
+        processor.on_rejected = self.reject
         for topic, type_name in processor.outputs.items():
             self._publishers_by_topic[topic] = self.create_publisher(get_message_class(type_name), topic, OUTPUT_QOS)
         for topic, type_name in processor.inputs.items():

@@ -57,6 +57,8 @@ class OfflineRun:
 
     def __post_init__(self):
         self.stats = {name: ProcessingStats() for name in self.processors}
+        for name, processor in self.processors.items():
+            processor.on_rejected = self.stats[name].reject
 
     def feed(self, topic: str, msg: Any) -> list[tuple[str, Any]]:
         """Deliver one message; return every (topic, message) it caused, depth first."""

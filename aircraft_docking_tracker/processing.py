@@ -37,6 +37,13 @@ class MessageProcessor:
     inputs: dict[str, str] = {}
     outputs: dict[str, str] = {}
     latest_only: frozenset[str] = frozenset()
+    #: Set by whoever runs the processor (live node, offline runner) to count a partial rejection,
+    #: e.g. invalid rows dropped from a message that is otherwise processed.
+    on_rejected: Callable[[str], None] | None = None
+
+    def report_rejection(self, reason: str) -> None:
+        if self.on_rejected is not None:
+            self.on_rejected(reason)
 
     def process(self, topic: str, msg: Any) -> list[tuple[str, Any]]:
         """Handle one input message; return ``(output topic, message)`` pairs to publish."""

@@ -81,10 +81,9 @@ class AssociationProcessor(MessageProcessor):
     """Message conversion around :class:`MultiTargetTracker` (live node and offline runner alike)."""
 
     def __init__(self, config: AssociationConfig | None = None, kalman: KalmanConfig | None = None,
-                 output: AssociationOutputConfig | None = None, on_invalid=None):
+                 output: AssociationOutputConfig | None = None):
         self.tracker = MultiTargetTracker(config, kalman)
         self.output = output or AssociationOutputConfig()
-        self.on_invalid = on_invalid
         self.invalid_detections = 0
         self.resets = 0
         self.inputs = {"detections": "sensor_msgs/msg/PointCloud2"}
@@ -108,8 +107,7 @@ class AssociationProcessor(MessageProcessor):
         result = self.tracker.step(stamp * 1e-9, boxes, rows["score"], rows["class_id"])
         if result.rejected:
             self.invalid_detections += result.rejected
-            if self.on_invalid:
-                self.on_invalid(f"detections: {result.rejected} invalid rows (NaN, inf or size <= 0) dropped")
+            self.report_rejection(f"detections: {result.rejected} invalid rows (NaN, inf or size <= 0) dropped")
         self.resets += int(result.reset)
         shown = result.tracks.visible(self.output.include_tentative, self.output.include_coasting)
         self._shown = len(shown)
@@ -182,10 +180,7 @@ SPEC = ProcessorSpec(NODE_NAME, {"": AssociationConfig, KALMAN_PREFIX: KalmanCon
 class AssociationNode(PerceptionNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        config = self.declare_config(AssociationConfig)
-        kalman = self.declare_config(KalmanConfig, prefix=KALMAN_PREFIX)
-        output = self.declare_config(AssociationOutputConfig, prefix=OUTPUT_PREFIX)
-        self.attach_processor(AssociationProcessor(config, kalman, output, on_invalid=self.reject))
+        self.attach_spec(SPEC)
 
     def on_config_changed(self, cfg) -> None:
         if isinstance(cfg, AssociationConfig):

@@ -124,9 +124,7 @@ SPEC = ProcessorSpec(NODE_NAME, {"": DetectorConfig, NODE_PREFIX: DetectorNodeCo
 class DetectorNode(PerceptionNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        config = self.declare_config(DetectorConfig)
-        node = self.declare_config(DetectorNodeConfig, prefix=NODE_PREFIX)
-        processor = self.attach_processor(DetectorProcessor(config, node))
+        processor = self.attach_spec(SPEC)
         if processor.model_error:
             self.get_logger().error(f"detector model not loaded: {processor.model_error}")
 

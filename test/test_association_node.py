@@ -70,7 +70,8 @@ def test_offline_runner_over_a_bag_matches_the_processor(tmp_path):
 
 def test_processor_tracks_rejects_and_resets():
     invalid = []
-    proc = AssociationProcessor(FAST, on_invalid=invalid.append)
+    proc = AssociationProcessor(FAST)
+    proc.on_rejected = invalid.append
     stats = ProcessingStats()
     for k in range(4):
         out = dict(process_guarded(proc, "detections", detections_msg(k), stats))

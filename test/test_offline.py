@@ -87,3 +87,15 @@ def test_unknown_node_is_a_clear_error(tmp_path):
     write_input(tmp_path / "in.mcap", frames=1)
     with pytest.raises(ValueError, match="unknown node"):
         run(tmp_path / "in.mcap", tmp_path / "out.mcap", ["nope"], progress=False)
+
+
+def test_partial_rejections_are_counted_offline_as_live():
+    """Association drops NaN rows but processes the rest: both runners count it the same way."""
+    from aircraft_docking_tracker.offline import build_processor
+
+    runner = OfflineRun({"association": build_processor("association")})
+    table = np.array([(10, 10, 5, 5, 0.9, 0), (np.nan, 1, 1, 1, 0.9, 0)], DETECTION_DTYPE)
+    msg = table_to_cloud(table)
+    msg.header.stamp = ns_to_stamp(1_000_000_000)
+    assert [t for t, _ in runner.feed("detections", msg)] == ["tracks", "tracks/markers"]
+    assert runner.stats["association"].rejected_total == 1
