@@ -9,9 +9,22 @@ pixels is searched at scales ``s = s_min * scale_factor^k`` between ``min_size``
 (texture level; the contour level is twice that) and every window on a ``stride``-pixel grid of
 that level is scored at once by :class:`features.LevelScan` and :meth:`Cascade.evaluate`.
 With ``orientation = both`` the transposed frame is scanned too (objects turned by 90 degrees,
-e.g. cars along the other street axis seen from a UAV). Overlapping windows are grouped by
-non-maximum suppression (``cv2.dnn.NMSBoxes``); a box needs ``min_neighbors`` raw windows
-overlapping it by ``nms_iou`` to be kept.
+e.g. cars along the other street axis seen from a UAV).
+
+Grouping (:func:`group_windows`, after OpenCV's ``groupRectangles``): a cascade fires on many
+windows around one object, shifted by the stride and a scale step. Windows are taken best
+last-stage margin first; each still-free window gathers every free window overlapping it by
+``group_iou`` into a group, whose box is the *mean* of its members (better placed than any one
+window on the stride grid) and whose score is
+
+    score = n + 1 / (1 + exp(-m))      (n windows in the group, m the best member's margin)
+
+so the integer part is OpenCV's neighbour count and the fraction orders groups of equal size.
+Groups with fewer than ``min_neighbors`` windows are dropped, then every group lying at least
+``containment`` inside a better one (intersection over the smaller area) is suppressed: vehicles
+seen from above or an aircraft on a stand do not overlap, but a window on half a car does.
+On the drone-view tiles this grouping, against keeping the best window of each cluster, took
+detection at <= 10 % false alarms from 70 % to 91 % with the same cascade (bench/README.md).
 """
 from __future__ import annotations
 
@@ -20,6 +33,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.special import expit
 
 from aircraft_docking_tracker.config import param
 from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
@@ -50,10 +64,14 @@ class DetectorConfig:
                             "for, else up to the frame)", low=0.0, high=10000.0)
     orientation: str = param("model", "also scan the transposed frame: model (as trained), upright, both",
                              choices=("model", "upright", "both"))
-    nms_iou: float = param(0.3, "IoU above which overlapping windows are grouped", low=0.0, high=1.0)
-    min_neighbors: int = param(2, "raw windows a grouped box needs (OpenCV's minNeighbors)", low=0, high=100)
-    score_threshold: float = param(0.0, "minimum last-stage margin (0: the trained cascade; <0 more recall)",
-                                   low=-100.0, high=100.0)
+    group_iou: float = param(0.3, "a window joins a group when it overlaps the group's best window by this "
+                             "IoU", low=0.0, high=1.0)
+    min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
+                               "detection score is this count plus a fraction", low=1, high=100)
+    containment: float = param(0.4, "drop a group lying this much inside a better one (intersection over the "
+                               "smaller box; 1: never)", low=0.0, high=1.0)
+    window_margin: float = param(0.0, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
+                                 "windows, >0 fewer)", low=-100.0, high=100.0)
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -134,18 +152,58 @@ def scan_cascade(gray: np.ndarray, cascade: Cascade, scale_factor: float = 1.2, 
             np.vstack(vectors) if with_vectors else None)
 
 
-def group_boxes(boxes: np.ndarray, scores: np.ndarray, nms_iou: float, min_neighbors: int,
-                max_detections: int) -> np.ndarray:
-    """Greedy NMS (``cv2.dnn.NMSBoxes``) and a neighbour count; returns the kept indices, best first."""
-    if len(boxes) == 0:
-        return np.zeros(0, int)
-    shifted = (scores - scores.min() + 1.0).astype(float)  # NMSBoxes keeps scores > its threshold 0
-    keep = cv2.dnn.NMSBoxes(boxes.tolist(), shifted.tolist(), 0.0, nms_iou)
-    keep = np.asarray(keep, int).reshape(-1)
-    if min_neighbors > 1 and len(keep):
-        neighbours = (box_iou(boxes[keep][:, None, :], boxes[None, :, :]) >= nms_iou).sum(axis=1)
-        keep = keep[neighbours >= min_neighbors]
-    return keep[:max_detections]
+def containment_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Intersection of boxes ``a[i]`` and ``b[j]`` over the smaller of the two areas (xywh boxes)."""
+    ix = np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0])
+    iy = np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1])
+    inter = np.clip(ix, 0.0, None) * np.clip(iy, 0.0, None)
+    smaller = np.minimum((a[:, 2] * a[:, 3])[:, None], (b[:, 2] * b[:, 3])[None, :])
+    return inter / np.maximum(smaller, 1e-12)
+
+
+def suppress_contained(boxes: np.ndarray, scores: np.ndarray, containment: float) -> np.ndarray:
+    """Indices of the boxes kept, best score first, dropping each box lying ``containment`` inside a
+    better kept one (intersection over the smaller area)."""
+    order = np.argsort(-scores, kind="stable")
+    if containment >= 1.0 or len(order) < 2:
+        return order
+    inside = containment_matrix(boxes[order], boxes[order]) >= containment
+    kept: list[int] = []
+    for k in range(len(order)):
+        if not inside[k, kept].any():
+            kept.append(k)
+    return order[kept]
+
+
+def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
+                  containment: float = 0.4, max_detections: int = 500) -> tuple[np.ndarray, np.ndarray]:
+    """Raw windows ``(n, 4)`` and their last-stage margins -> grouped ``(boxes, scores)``, best first.
+
+    See the module docstring: mean box per group, score = windows in the group + logistic of the best
+    margin, groups smaller than ``min_neighbors`` dropped, contained groups suppressed.
+    """
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    margins = np.asarray(margins, np.float64).reshape(-1)
+    order = np.argsort(-margins, kind="stable")
+    boxes, margins = boxes[order], margins[order]
+    free = np.ones(len(boxes), bool)
+    group_boxes, group_scores = [], []
+    for seed in range(len(boxes)):
+        if not free[seed]:
+            continue
+        candidates = np.flatnonzero(free)
+        members = candidates[box_iou(boxes[seed], boxes[candidates]) >= group_iou]
+        members = np.union1d(members, [seed])
+        free[members] = False
+        if len(members) < min_neighbors:
+            continue
+        group_boxes.append(boxes[members].mean(axis=0))
+        group_scores.append(len(members) + expit(margins[seed]))
+    if not group_boxes:
+        return np.zeros((0, 4)), np.zeros(0)
+    group_boxes, group_scores = np.asarray(group_boxes), np.asarray(group_scores)
+    keep = suppress_contained(group_boxes, group_scores, containment)[:max_detections]
+    return group_boxes[keep], group_scores[keep]
 
 
 class Detector:
@@ -180,7 +238,7 @@ class Detector:
     def raw(self, gray: np.ndarray, last_stage_margin: float | None = None):
         """Ungrouped windows ``(boxes, scores)`` in ``gray``'s pixels, both orientations if configured."""
         cfg = self.config
-        margin = cfg.score_threshold if last_stage_margin is None else last_stage_margin
+        margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
         views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         all_boxes, all_scores = [], []
         for view, transposed in views:
@@ -212,11 +270,13 @@ class Detector:
         except FeatureError as exc:
             raise DetectorError(str(exc)) from exc
         if self.cascade is not None:
-            keep = group_boxes(boxes, scores, cfg.nms_iou, cfg.min_neighbors, cfg.max_detections)
-        else:  # OpenCV grouped already (minNeighbors); merge the two orientations by NMS only
-            keep = group_boxes(boxes, scores, cfg.nms_iou, 0, cfg.max_detections)
-        out = np.zeros(len(keep), DETECTION_DTYPE)
-        out["x"], out["y"] = boxes[keep, 0] + x0, boxes[keep, 1] + y0
-        out["w"], out["h"] = boxes[keep, 2], boxes[keep, 3]
-        out["score"], out["class_id"] = scores[keep], cfg.class_id
+            boxes, scores = group_windows(boxes, scores, cfg.group_iou, cfg.min_neighbors, cfg.containment,
+                                          cfg.max_detections)
+        else:  # OpenCV grouped already (minNeighbors); the two orientations only need merging
+            keep = suppress_contained(boxes, scores, cfg.containment)[:cfg.max_detections]
+            boxes, scores = boxes[keep], scores[keep]
+        out = np.zeros(len(boxes), DETECTION_DTYPE)
+        out["x"], out["y"] = boxes[:, 0] + x0, boxes[:, 1] + y0
+        out["w"], out["h"] = boxes[:, 2], boxes[:, 3]
+        out["score"], out["class_id"] = scores, cfg.class_id
         return out

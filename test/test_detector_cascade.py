@@ -7,7 +7,7 @@ import pytest
 
 from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
 from multi_target_tracker.cascade import Cascade, CascadeError, CascadeTrainConfig, Stage, train_cascade
-from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_boxes
+from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_windows, suppress_contained
 from multi_target_tracker.train_cascade import LabelledImage, NegativeMiner, positive_vectors
 
 WINDOW = (48, 24)
@@ -53,7 +53,7 @@ def train_tiny_model(path):
     return cascade
 
 
-TINY_DETECTOR = dict(scale_factor=1.1, min_size=20, max_size=30, min_neighbors=2, nms_iou=0.2)
+TINY_DETECTOR = dict(scale_factor=1.1, min_size=20, max_size=30, min_neighbors=2, group_iou=0.2)
 
 
 @pytest.fixture(scope="module")
@@ -118,14 +118,31 @@ def test_stage_and_cascade_evaluation_by_hand():
     assert idx.tolist() == [0, 1]
 
 
-def test_group_boxes_nms_and_neighbours():
+def test_group_windows_by_hand():
+    # three windows on one object (margins 1, 3, 2), a lone window elsewhere (margin 5)
     boxes = np.array([[10, 10, 40, 20], [12, 11, 40, 20], [11, 9, 40, 20], [100, 100, 40, 20]], float)
-    scores = np.array([1.0, 3.0, 2.0, 5.0])
-    keep = group_boxes(boxes, scores, 0.3, 1, 10)
-    assert keep.tolist() == [3, 1]
-    keep = group_boxes(boxes, scores, 0.3, 2, 10)   # the lone box has no neighbour
-    assert keep.tolist() == [1]
-    assert group_boxes(np.zeros((0, 4)), np.zeros(0), 0.3, 1, 10).tolist() == []
+    margins = np.array([1.0, 3.0, 2.0, 5.0])
+    grouped, scores = group_windows(boxes, margins, group_iou=0.3, min_neighbors=1, containment=1.0)
+    # the lone window seeds first; the cluster's box is the mean of its three windows
+    assert grouped.tolist() == [[11, 10, 40, 20], [100, 100, 40, 20]]
+    assert scores == pytest.approx([3 + 1 / (1 + np.exp(-3.0)), 1 + 1 / (1 + np.exp(-5.0))])
+    grouped, scores = group_windows(boxes, margins, group_iou=0.3, min_neighbors=2, containment=1.0)
+    assert grouped.tolist() == [[11, 10, 40, 20]]           # the lone window has no neighbour
+    grouped, scores = group_windows(boxes, margins, group_iou=0.9, min_neighbors=1, containment=1.0)
+    assert len(grouped) == 4                                  # nothing overlaps that much
+    empty, no_scores = group_windows(np.zeros((0, 4)), np.zeros(0))
+    assert empty.shape == (0, 4) and no_scores.shape == (0,)
+
+
+def test_contained_groups_are_suppressed():
+    # a window on half a car (inside the car's box) and a car box: IoU 0.5, containment 1
+    boxes = np.array([[0, 0, 40, 20], [0, 0, 20, 20], [60, 0, 40, 20]], float)
+    scores = np.array([5.0, 4.0, 3.0])
+    assert suppress_contained(boxes, scores, 0.4).tolist() == [0, 2]
+    assert suppress_contained(boxes, scores, 1.0).tolist() == [0, 1, 2]   # 1 disables it
+    # a box touching another by a sliver stays
+    assert suppress_contained(np.array([[0, 0, 40, 20], [38, 0, 40, 20]], float), np.array([2.0, 1.0]),
+                              0.4).tolist() == [0, 1]
 
 
 def test_discrete_adaboost_trains_too():
