@@ -209,47 +209,59 @@ class LevelScan:
         self.m_lbp = np.max([block_max[dy // s:dy // s + r, dx // s:dx // s + c] for dy, dx in BLOCK_OFFSETS],
                             axis=0).reshape(-1).astype(np.int64)
 
-    # --- contour: potential maps by box sums, per-window maximum by sliding max (eq. 4)
+    # --- contour: potential maps from integral images, per-window maximum by sliding max (eq. 4)
     def _contour(self, gray_c: np.ndarray, edge_threshold: float) -> None:
         n, s2 = CONTOUR_SIZE, 2 * self.stride
-        b = contour_image(gray_c, edge_threshold).astype(np.float32)  # integer sums < 2^24: exact
+        b = contour_image(gray_c, edge_threshold)
         b[0, :] = b[-1, :] = 0
         b[:, 0] = b[:, -1] = 0
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
         x0 = 2 + s2 * np.arange(self.cols)
-        ys = np.arange(b.shape[0], dtype=np.float32)[:, None]
-        xs = np.arange(b.shape[1], dtype=np.float32)[None, :]
+        bf = b.astype(np.float32)
+        # integral images (sums over y' < y, x' < x) of b, Y b and X b; all sums are exact integers
+        sum_b = cv2.integral(b, sdepth=cv2.CV_32S).astype(np.float64)
+        sum_yb = cv2.integral(bf * np.arange(b.shape[0], dtype=np.float32)[:, None], sdepth=cv2.CV_64F)
+        sum_xb = cv2.integral(bf * np.arange(b.shape[1], dtype=np.float32)[None, :], sdepth=cv2.CV_64F)
 
-        def run_sum(image, ksize):  # sum over the n pixels below / right of each pixel
-            return cv2.boxFilter(image, -1, ksize, anchor=(0, 0), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        def down(integral):  # sum over rows y0 .. y0+n-1 of every column X: (rows, W)
+            below = np.diff(integral[y0 + n], axis=1)
+            return below - np.diff(integral[y0], axis=1)
+
+        def right(integral):  # sum over columns x0 .. x0+n-1 of every row Y: (H, cols)
+            return np.diff(integral[:, x0 + n], axis=0) - np.diff(integral[:, x0], axis=0)
 
         # P_x(j) = sum_i b(y0+i, X)(n - i) = (n + y0) sum_Y b - sum_Y Y b, rows y0, every column X
-        self.px = (n + y0)[:, None].astype(np.float32) * run_sum(b, (1, n))[y0] - run_sum(b * ys, (1, n))[y0]
+        self.px = ((n + y0)[:, None] * down(sum_b) - down(sum_yb)).astype(np.float32)
         # P_y(i) = sum_j b(Y, x0+j)(j + 1) = sum_X X b - (x0 - 1) sum_X b, every row Y, columns x0
-        self.py = run_sum(b * xs, (n, 1))[:, x0] - (x0 - 1)[None, :].astype(np.float32) * run_sum(b, (n, 1))[:, x0]
+        self.py = (right(sum_xb) - (x0 - 1)[None, :] * right(sum_b)).astype(np.float32)
         run_x = cv2.dilate(self.px, np.ones((1, n), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         run_y = cv2.dilate(self.py, np.ones((n, 1), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
         self._y0, self._x0 = y0, x0
 
     def raw(self, features: np.ndarray, windows: np.ndarray) -> np.ndarray:
-        """Raw (un-normalised, integer) values ``(n windows, k features)`` of fused-vector features."""
+        """Raw (un-normalised, integer) values ``(n windows, k features)`` of fused-vector features.
+
+        One flat ``np.take`` per table: a window's base offset plus a feature's offset.
+        """
         features = np.asarray(features, np.int64)
         r, c = np.divmod(np.asarray(windows, np.int64), self.cols)
-        r, c = r[:, None], c[:, None]
         out = np.zeros((len(r), len(features)), np.int64)
-        s = self.stride
         lbp = features < LBP_DIM
-        if lbp.any():
+        if lbp.any():   # blocks[r + by, c + bx, code], blocks of shape (hb, wb, 256)
+            hb, wb, _ = self.blocks.shape
             block, code = np.divmod(features[lbp], N_CODES)
-            offsets = np.asarray(BLOCK_OFFSETS)[block] // s
-            out[:, lbp] = self.blocks[r + offsets[:, 0], c + offsets[:, 1], code]
+            by, bx = (np.asarray(BLOCK_OFFSETS)[block] // self.stride).T
+            offset = (by * wb + bx) * N_CODES + code
+            out[:, lbp] = np.take(self.blocks, ((r * wb + c) * N_CODES)[:, None] + offset[None, :])
         k = features - LBP_DIM
         along_x, along_y = (k >= 0) & (k < CONTOUR_SIZE), k >= CONTOUR_SIZE
-        if along_x.any():
-            out[:, along_x] = self.px[r, self._x0[c] + k[along_x]]
-        if along_y.any():
-            out[:, along_y] = self.py[self._y0[r] + k[along_y] - CONTOUR_SIZE, c]
+        if along_x.any():   # px[r, x0[c] + k]
+            out[:, along_x] = np.take(self.px, (r * self.px.shape[1] + self._x0[c])[:, None] + k[along_x][None, :])
+        if along_y.any():   # py[y0[r] + k - 64, c]
+            cols = self.py.shape[1]
+            out[:, along_y] = np.take(self.py, (self._y0[r] * cols + c)[:, None]
+                                      + ((k[along_y] - CONTOUR_SIZE) * cols)[None, :])
         return out
 
     def maxima(self, features: np.ndarray, windows: np.ndarray) -> np.ndarray:
