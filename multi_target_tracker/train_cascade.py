@@ -248,16 +248,30 @@ def _flip_box(box, code: int, shape) -> np.ndarray:
 
 
 class NegativeMiner:
-    """Windows of the training images away from every box that the cascade so far accepts."""
+    """Windows of the training images away from every box that the cascade so far accepts.
+
+    Early stages accept many windows: images are visited in random order and each level gives at
+    most a few, so negatives come from many images. Once the accepted windows of the *whole* set
+    (estimated from the images visited) would fit in ``pool_size`` vectors, one full pass keeps all of
+    them as a pool; later stages only filter the pool by the cascade (no more image scans), and
+    training stops when the pool runs dry: every hard negative of the data has been used.
+    """
 
     def __init__(self, data: list[LabelledImage], negative_images: list[Path], scan: dict, rotate90: bool,
-                 negative_iou: float = 0.3, rng: np.random.Generator | None = None):
+                 negative_iou: float = 0.3, rng: np.random.Generator | None = None, pool_size: int = 200_000,
+                 progress: Callable[[str], None] | None = None):
         self.data, self.negative_images = data, negative_images
         self.scan, self.rotate90, self.negative_iou = scan, rotate90, negative_iou
         self.rng = rng or np.random.default_rng(0)
+        self.pool_size, self.pool = pool_size, None
+        self.say = progress or (lambda msg: None)
+
+    @property
+    def n_sources(self) -> int:
+        return len(self.data) + len(self.negative_images)
 
     def _sources(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        order = list(range(len(self.data) + len(self.negative_images)))
+        order = list(range(self.n_sources))
         self.rng.shuffle(order)
         for k in order:
             if k < len(self.data):
@@ -267,31 +281,54 @@ class NegativeMiner:
                 if image is not None:
                     yield image, np.zeros((0, 4))
 
+    def _scan(self, cascade: Cascade, gray: np.ndarray, boxes: np.ndarray, per_image: int | None):
+        """Accepted windows of one image away from its boxes: ``(vectors, how many were accepted)``;
+        ``per_image`` caps the vectors kept (spread over the pyramid levels), None keeps all."""
+        views = [(gray, boxes)]
+        if self.rotate90:
+            views.append((np.ascontiguousarray(gray.T), boxes[:, [1, 0, 3, 2]]))
+        found, accepted = [], 0
+        for g, b in views:
+            n_levels = len(window_scales(cascade.window, g.shape[::-1], self.scan["scale_factor"],
+                                         self.scan["min_size"], self.scan["max_size"]))
+            cap = None if per_image is None else max(1, int(math.ceil(per_image / max(1, n_levels))))
+
+            def select(wins, b=b, cap=cap):
+                nonlocal accepted
+                ok = np.arange(len(wins))
+                if len(b):
+                    ok = ok[box_iou(wins[:, None, :], b[None, :, :]).max(axis=1) < self.negative_iou]
+                accepted += len(ok)
+                return ok if cap is None or len(ok) <= cap else self.rng.choice(ok, cap, replace=False)
+
+            found.append(scan_cascade(g, cascade, with_vectors=True, select=select, **self.scan)[2])
+        return np.vstack(found), accepted
+
     def __call__(self, cascade: Cascade, n: int) -> np.ndarray:
-        per_image = max(4, int(math.ceil(4 * n / max(1, len(self.data) + len(self.negative_images)))))
-        found, total = [], 0
+        if self.pool is not None:
+            self.pool = self.pool[cascade.evaluate_vectors(self.pool)[0]]
+            return self._draw(self.pool, n)
+        per_image = max(4, int(math.ceil(4 * n / max(1, self.n_sources))))
+        found, total, accepted, visited = [], 0, 0, 0
         for gray, boxes in self._sources():
-            views = [(gray, boxes)]
-            if self.rotate90:
-                views.append((np.ascontiguousarray(gray.T), boxes[:, [1, 0, 3, 2]]))
-            for g, b in views:
-                n_levels = len(window_scales(cascade.window, g.shape[::-1], self.scan["scale_factor"],
-                                             self.scan["min_size"], self.scan["max_size"]))
-                cap = max(1, int(math.ceil(per_image / max(1, n_levels))))
-
-                def select(wins, b=b, cap=cap):
-                    ok = np.arange(len(wins))
-                    if len(b):
-                        ok = ok[box_iou(wins[:, None, :], b[None, :, :]).max(axis=1) < self.negative_iou]
-                    return ok if len(ok) <= cap else self.rng.choice(ok, cap, replace=False)
-
-                _, _, vec = scan_cascade(g, cascade, with_vectors=True, select=select, **self.scan)
-                found.append(vec)
-                total += len(vec)
+            vectors, count = self._scan(cascade, gray, boxes, per_image)
+            found.append(vectors)
+            total, accepted, visited = total + len(vectors), accepted + count, visited + 1
             if total >= n:
                 break
+        estimate = accepted / max(1, visited) * self.n_sources
+        if estimate <= self.pool_size and self.pool_size > 0:
+            self.say(f"about {estimate:.0f} windows pass the cascade over all images: keeping them all as the "
+                     "negative pool")
+            self.pool = np.vstack([self._scan(cascade, gray, boxes, None)[0] for gray, boxes in self._sources()]
+                                  or [np.zeros((0, FUSED_DIM), np.uint8)])
+            self.say(f"negative pool: {len(self.pool)} windows")
+            return self._draw(self.pool, n)
         x = np.vstack(found) if found else np.zeros((0, FUSED_DIM), np.uint8)
         return x[:n]
+
+    def _draw(self, pool: np.ndarray, n: int) -> np.ndarray:
+        return pool if len(pool) <= n else pool[np.sort(self.rng.choice(len(pool), n, replace=False))]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -315,6 +352,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-truncated", action="store_true", help="also use boxes cut by the frame border")
     p.add_argument("--jitter", type=int, default=2, help="randomly shifted/scaled copies per positive view")
     p.add_argument("--max-positives", type=int, default=0, help="subsample positives to this many (0: all)")
+    p.add_argument("--negative-pool", type=int, default=200_000,
+                   help="once all windows the cascade accepts fit in this many vectors (1152 bytes each), keep "
+                   "them and stop scanning images (0: scan every stage)")
     p.add_argument("--negative-iou", type=float, default=0.3, help="a negative window overlaps every box less")
     p.add_argument("--scale-factor", type=float, default=1.2, help="pyramid step while mining negatives")
     p.add_argument("--stride", type=int, default=4, choices=(2, 4, 8), help="scan stride while mining negatives")
@@ -358,7 +398,7 @@ def run(args) -> Cascade:
                  if p.suffix.lower() in IMAGE_SUFFIXES]
     miner = NegativeMiner(data, negatives, dict(scale_factor=args.scale_factor, stride=args.stride,
                                                 min_size=min_size, max_size=max_size),
-                          args.rotate90, args.negative_iou, rng)
+                          args.rotate90, args.negative_iou, rng, args.negative_pool, say)
     say(f"mining negatives at window heights {min_size:.0f}..{max_size:.0f} px")
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     info = {"data": [str(p) for p in args.yolo + args.voc + args.bag],

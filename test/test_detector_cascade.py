@@ -158,3 +158,30 @@ def test_discrete_adaboost_trains_too():
     cascade = train_cascade(xp, mine, cfg, (32, 32), 40.0)
     assert cascade.used_features().max() < 1024
     assert len(cascade.evaluate_vectors(xp)[0]) >= 190
+
+
+def test_negative_pool_replaces_image_scans_once_small(tiny_model):
+    _, cascade = tiny_model
+    rng = np.random.default_rng(3)
+    loads = []
+    data = []
+    for k in range(6):
+        image, boxes = _scene(rng, 3)
+        data.append(LabelledImage(f"p{k}", lambda image=image, k=k: loads.append(k) or image, boxes))
+    scan = dict(scale_factor=1.15, stride=4, min_size=20, max_size=30)
+    one_stage = Cascade(cascade.window, cascade.feature_set, cascade.edge_threshold, cascade.stages[:1])
+    two_stages = Cascade(cascade.window, cascade.feature_set, cascade.edge_threshold, cascade.stages[:2])
+
+    pooled = NegativeMiner(data, [], scan, False, 0.3, np.random.default_rng(0), pool_size=10 ** 6)
+    first = pooled(one_stage, 50)
+    assert pooled.pool is not None and len(first) == 50
+    loads_after_pool = len(loads)
+    assert loads_after_pool >= len(data)                 # one full pass over every image built the pool
+    assert len(one_stage.evaluate_vectors(pooled.pool)[0]) == len(pooled.pool)
+    second = pooled(two_stages, 10 ** 6)                 # filtered, not scanned again
+    assert len(loads) == loads_after_pool
+    assert len(second) == len(pooled.pool) and len(two_stages.evaluate_vectors(second)[0]) == len(second)
+
+    scanning = NegativeMiner(data, [], scan, False, 0.3, np.random.default_rng(0), pool_size=0)
+    scanning(one_stage, 50)
+    assert scanning.pool is None                         # pool_size 0: every stage scans images
