@@ -88,6 +88,28 @@ class Stage:
         return stage
 
 
+@dataclass(frozen=True)
+class PackedStages:
+    """All stages' stumps in flat arrays (what the compiled window loop reads): stage s holds stumps
+    ``ends[s-1] .. ends[s]-1`` and passes when their sum reaches ``stage_thresholds[s]``."""
+
+    features: np.ndarray
+    thresholds: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    ends: np.ndarray
+    stage_thresholds: np.ndarray
+
+    @classmethod
+    def of(cls, stages: list[Stage]) -> "PackedStages":
+        def flat(name, dtype):
+            return np.ascontiguousarray(np.concatenate([getattr(s, name) for s in stages]) if stages
+                                        else np.zeros(0), dtype)
+        return cls(flat("features", np.int64), flat("thresholds", np.int64), flat("left", np.float64),
+                   flat("right", np.float64), np.cumsum([len(s.features) for s in stages], dtype=np.int64),
+                   np.asarray([s.threshold for s in stages], np.float64).reshape(-1))
+
+
 @dataclass
 class Cascade:
     """A trained cascade: window size (w, h) in pixels at scale 1, feature set, stages."""
@@ -123,7 +145,15 @@ class Cascade:
         x = np.asarray(x)
         if x.ndim != 2 or x.shape[1] != FUSED_DIM:
             raise CascadeError(f"expected N x {FUSED_DIM} feature vectors, got {x.shape}")
-        return self.evaluate(lambda f, t, idx: x[idx][:, f] >= t[None, :], len(x), last_stage_margin)
+        return self.evaluate(lambda f, t, idx: x[idx[:, None], f[None, :]] >= t[None, :], len(x), last_stage_margin)
+
+    def packed(self) -> PackedStages:
+        """The stages as :class:`PackedStages` (cached; rebuilt when stages were added)."""
+        cached = self.__dict__.get("_packed")
+        if cached is None or cached[0] != len(self.stages):
+            cached = (len(self.stages), PackedStages.of(self.stages))
+            self.__dict__["_packed"] = cached
+        return cached[1]
 
     @property
     def n_stumps(self) -> int:

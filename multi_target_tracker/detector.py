@@ -132,7 +132,7 @@ def scan_cascade(gray: np.ndarray, cascade: Cascade, scale_factor: float = 1.2, 
         scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold)
         if scan.n_windows == 0:
             continue
-        idx, score = cascade.evaluate(scan.passes, scan.n_windows, last_stage_margin)
+        idx, score = scan.evaluate(cascade.packed(), last_stage_margin)
         if len(idx) == 0:
             continue
         fx, fy = width / level[0], height / level[1]

@@ -22,21 +22,28 @@ LBP code: neighbours of pixel c clockwise from the top-left, neighbour k sets bi
 grey value is >= c's (bit 0 = top-left, 1 = top, 2 = top-right, 3 = right, 4 = bottom-right,
 5 = bottom, 6 = bottom-left, 7 = left).
 
-Every window of a frame is scored without a Python loop over windows by :class:`LevelScan`: per
-pyramid level one LBP code image, per-cell code histograms (one ``bincount``) and block sums,
-one binary contour image and its column/row cumulative sums; the per-window maxima of eqs. 3-4
-are exact (maximum over the 256 bins of each block; sliding maxima of the potential maps by
-``cv2.dilate``). All raw values are integers, so the normalised comparison ``255 v_k / max >= t``
-is tested exactly as ``255 v_k >= t max``.
+Every window of a frame is scored at once by :class:`LevelScan`: per pyramid level one LBP code
+image, per-cell code histograms and block sums, one binary contour image and its column/row
+prefix sums; the per-window maxima of eqs. 3-4 are exact (maximum over the 256 bins of each
+block; sliding maxima of the potential maps by ``cv2.dilate``). All raw values are integers, so
+the normalised comparison ``255 v_k / max >= t`` is tested exactly as ``255 v_k >= t max``.
+The per-pixel and per-window loops (cell histograms, contour potentials, the cascade with its
+early exit) are compiled by numba; :func:`window_features` is the plain reference they are
+tested against.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
+import numba
 import numpy as np
 
 from aircraft_docking_tracker.config import param
+
+if TYPE_CHECKING:
+    from multi_target_tracker.cascade import PackedStages
 
 LBP_SIZE = 32          # texture window side (seed §2.1)
 BLOCK = 16             # texture block side
@@ -194,17 +201,14 @@ class LevelScan:
         s = self.stride
         codes = lbp_codes(gray_l)
         hc, wc = codes.shape[0] // s, codes.shape[1] // s
-        codes = codes[:hc * s, :wc * s]
-        cell = (np.arange(hc * s) // s)[:, None] * wc + (np.arange(wc * s) // s)[None, :]
-        hist = np.bincount((cell * N_CODES + codes).ravel(), minlength=hc * wc * N_CODES)
-        blocks = hist.reshape(hc, wc, N_CODES).astype(np.int16)
+        blocks = _cell_histograms(codes, s, hc, wc)
         span = 1  # sum 16/stride cells per side by doubling (stride divides 16: a power of two)
         while span < BLOCK // s:
-            blocks = blocks[:-span] + blocks[span:]
             blocks = blocks[:, :-span] + blocks[:, span:]
+            blocks = blocks[:, :, :-span] + blocks[:, :, span:]
             span *= 2
-        self.blocks = blocks  # blocks[by, bx, code]: histogram of the 16x16 block at cell (by, bx)
-        block_max = self.blocks.max(axis=2)
+        self.blocks = blocks  # blocks[code, by, bx]: histogram of the 16x16 block at cell (by, bx)
+        block_max = self.blocks.max(axis=0)
         r, c = self.rows, self.cols
         self.m_lbp = np.max([block_max[dy // s:dy // s + r, dx // s:dx // s + c] for dy, dx in BLOCK_OFFSETS],
                             axis=0).reshape(-1).astype(np.int64)
@@ -212,72 +216,34 @@ class LevelScan:
     # --- contour: potential maps from integral images, per-window maximum by sliding max (eq. 4)
     def _contour(self, gray_c: np.ndarray, edge_threshold: float) -> None:
         n, s2 = CONTOUR_SIZE, 2 * self.stride
-        b = contour_image(gray_c, edge_threshold)
-        b[0, :] = b[-1, :] = 0
-        b[:, 0] = b[:, -1] = 0
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
         x0 = 2 + s2 * np.arange(self.cols)
-        bf = b.astype(np.float32)
-        # integral images (sums over y' < y, x' < x) of b, Y b and X b; all sums are exact integers
-        sum_b = cv2.integral(b, sdepth=cv2.CV_32S).astype(np.float64)
-        sum_yb = cv2.integral(bf * np.arange(b.shape[0], dtype=np.float32)[:, None], sdepth=cv2.CV_64F)
-        sum_xb = cv2.integral(bf * np.arange(b.shape[1], dtype=np.float32)[None, :], sdepth=cv2.CV_64F)
-
-        def down(integral):  # sum over rows y0 .. y0+n-1 of every column X: (rows, W)
-            below = np.diff(integral[y0 + n], axis=1)
-            return below - np.diff(integral[y0], axis=1)
-
-        def right(integral):  # sum over columns x0 .. x0+n-1 of every row Y: (H, cols)
-            return np.diff(integral[:, x0 + n], axis=0) - np.diff(integral[:, x0], axis=0)
-
-        # P_x(j) = sum_i b(y0+i, X)(n - i) = (n + y0) sum_Y b - sum_Y Y b, rows y0, every column X
-        self.px = ((n + y0)[:, None] * down(sum_b) - down(sum_yb)).astype(np.float32)
-        # P_y(i) = sum_j b(Y, x0+j)(j + 1) = sum_X X b - (x0 - 1) sum_X b, every row Y, columns x0
-        self.py = (right(sum_xb) - (x0 - 1)[None, :] * right(sum_b)).astype(np.float32)
+        self.px, self.py = _contour_potentials(_gray(gray_c), float(edge_threshold), s2, len(y0), len(x0), n)
         run_x = cv2.dilate(self.px, np.ones((1, n), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         run_y = cv2.dilate(self.py, np.ones((n, 1), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
         self._y0, self._x0 = y0, x0
 
-    def raw(self, features: np.ndarray, windows: np.ndarray) -> np.ndarray:
-        """Raw (un-normalised, integer) values ``(n windows, k features)`` of fused-vector features.
+    def evaluate(self, stages: "PackedStages", last_stage_margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Run a cascade on every window of the level: ``(passing window indices, last-stage score)``.
 
-        One flat ``np.take`` per table: a window's base offset plus a feature's offset.
+        Exactly the test of :meth:`Cascade.evaluate_vectors` on :meth:`vectors` (``255 v_k >= t max``
+        in integers), stage by stage over the windows still alive (Viola-Jones' early exit), compiled
+        by numba: a rejected window's later features are never read.
         """
-        features = np.asarray(features, np.int64)
-        r, c = np.divmod(np.asarray(windows, np.int64), self.cols)
-        out = np.zeros((len(r), len(features)), np.int64)
-        lbp = features < LBP_DIM
-        if lbp.any():   # blocks[r + by, c + bx, code], blocks of shape (hb, wb, 256)
-            hb, wb, _ = self.blocks.shape
-            block, code = np.divmod(features[lbp], N_CODES)
-            by, bx = (np.asarray(BLOCK_OFFSETS)[block] // self.stride).T
-            offset = (by * wb + bx) * N_CODES + code
-            out[:, lbp] = np.take(self.blocks, ((r * wb + c) * N_CODES)[:, None] + offset[None, :])
-        k = features - LBP_DIM
-        along_x, along_y = (k >= 0) & (k < CONTOUR_SIZE), k >= CONTOUR_SIZE
-        if along_x.any():   # px[r, x0[c] + k]
-            out[:, along_x] = np.take(self.px, (r * self.px.shape[1] + self._x0[c])[:, None] + k[along_x][None, :])
-        if along_y.any():   # py[y0[r] + k - 64, c]
-            cols = self.py.shape[1]
-            out[:, along_y] = np.take(self.py, (self._y0[r] * cols + c)[:, None]
-                                      + ((k[along_y] - CONTOUR_SIZE) * cols)[None, :])
-        return out
-
-    def maxima(self, features: np.ndarray, windows: np.ndarray) -> np.ndarray:
-        """The eq. 3 or eq. 4 maximum of the part each feature belongs to, ``(n windows, k features)``."""
-        lbp = np.asarray(features) < LBP_DIM
-        out = np.zeros((len(windows), len(lbp)), np.int64)
-        if lbp.any():
-            out[:, lbp] = self.m_lbp[windows][:, None]
-        if (~lbp).any():
-            out[:, ~lbp] = self.m_contour[windows][:, None]
-        return out
-
-    def passes(self, features: np.ndarray, thresholds: np.ndarray, windows: np.ndarray) -> np.ndarray:
-        """Exact ``255 * v_k / max >= t_k``, ``(n windows, k features)`` (False where max is 0)."""
-        m = self.maxima(features, windows)
-        return (255 * self.raw(features, windows) >= np.asarray(thresholds, np.int64)[None, :] * m) & (m > 0)
+        empty_i16 = np.zeros((N_CODES, 1, 1), np.int16)   # tables a feature set does not use
+        empty_f32, empty_i64 = np.zeros((1, 1), np.float32), np.zeros(1, np.int64)
+        return _evaluate_level(
+            self.blocks if self.m_lbp is not None else empty_i16,
+            self.px if self.m_contour is not None else empty_f32,
+            self.py if self.m_contour is not None else empty_f32,
+            self.m_lbp if self.m_lbp is not None else empty_i64,
+            self.m_contour if self.m_contour is not None else empty_i64,
+            self.rows, self.cols, BLOCK // self.stride,
+            self._x0 if self.m_contour is not None else empty_i64,
+            self._y0 if self.m_contour is not None else empty_i64,
+            stages.features, stages.thresholds, stages.left, stages.right, stages.ends, stages.stage_thresholds,
+            float(last_stage_margin))
 
     def vectors(self, windows: np.ndarray) -> np.ndarray:
         """Full normalised 1152-d vectors (uint8, floored) of some windows, for training."""
@@ -287,7 +253,7 @@ class LevelScan:
         r, c = np.divmod(np.asarray(windows), self.cols)
         s = self.stride
         if self.m_lbp is not None:
-            raw = np.concatenate([self.blocks[r + dy // s, c + dx // s, :] for dy, dx in BLOCK_OFFSETS], axis=1)
+            raw = np.concatenate([self.blocks[:, r + dy // s, c + dx // s].T for dy, dx in BLOCK_OFFSETS], axis=1)
             out[:, :LBP_DIM] = _floor_scaled(raw, self.m_lbp[windows])
         if self.m_contour is not None:
             cols = self._x0[c][:, None] + np.arange(CONTOUR_SIZE)[None, :]
@@ -307,3 +273,121 @@ def _floor_scaled(raw: np.ndarray, maxima: np.ndarray) -> np.ndarray:
 def quantised(vector: np.ndarray) -> np.ndarray:
     """``floor`` of a normalised float vector as uint8 (the training representation)."""
     return np.floor(np.asarray(vector) + 1e-9).clip(0, 255).astype(np.uint8)
+
+
+@numba.njit(cache=True, nogil=True)
+def _contour_potentials(gray, edge_threshold, step, rows, cols, n):
+    """``P_x`` of every column below each window top row ``y0 = 2 + step * r`` (``(rows, W)``) and ``P_y``
+    of every row right of each window left column ``x0 = 2 + step * c`` (``(H, cols)``), float32.
+
+    ``b`` is :func:`contour_image` with the frame's outer pixels cleared (3x3 Laplacian, kernel
+    ``[[0,1,0],[1,-4,1],[0,1,0]]``). With prefix sums over ``y' < y`` of ``b`` and ``y' b`` down each
+    column, ``P_x(j) = sum_i b(y0+i, X)(n - i) = (n + y0) sum_Y b - sum_Y Y b`` over rows ``y0 .. y0+n-1``;
+    along each row ``P_y(i) = sum_X X b - (x0 - 1) sum_X b`` over columns ``x0 .. x0+n-1``. The prefix
+    sums are kept only where windows start and end (every ``step`` pixels, as ``n`` is a multiple).
+    """
+    height, width = gray.shape
+    b = np.zeros((height, width), np.int64)
+    for y in range(1, height - 1):
+        for x in range(1, width - 1):
+            lap = (np.int64(gray[y - 1, x]) + gray[y + 1, x] + gray[y, x - 1] + gray[y, x + 1]
+                   - 4 * np.int64(gray[y, x]))
+            if abs(lap) > edge_threshold:
+                b[y, x] = 1
+    marks, xmarks = rows + n // step, cols + n // step   # prefix rows 2, 2 + step, ...; columns alike
+    col_sum = np.zeros((marks, width), np.int64)
+    col_ysum = np.zeros((marks, width), np.int64)
+    run, yrun = np.zeros(width, np.int64), np.zeros(width, np.int64)
+    for y in range(height + 1):              # a window may end at the last row: mark y = height too
+        if y >= 2 and (y - 2) % step == 0 and (y - 2) // step < marks:
+            col_sum[(y - 2) // step] = run
+            col_ysum[(y - 2) // step] = yrun
+        if y == height:
+            break
+        for x in range(width):
+            run[x] += b[y, x]
+            yrun[x] += y * b[y, x]
+    px = np.empty((rows, width), np.float32)
+    for r in range(rows):
+        top = 2 + step * r
+        for x in range(width):
+            count = col_sum[r + n // step, x] - col_sum[r, x]
+            px[r, x] = (n + top) * count - (col_ysum[r + n // step, x] - col_ysum[r, x])
+    py = np.empty((height, cols), np.float32)
+    row_sum = np.zeros(xmarks, np.int64)
+    row_xsum = np.zeros(xmarks, np.int64)
+    for y in range(height):
+        total, xtotal = 0, 0
+        for x in range(width + 1):
+            if x >= 2 and (x - 2) % step == 0 and (x - 2) // step < xmarks:
+                row_sum[(x - 2) // step] = total
+                row_xsum[(x - 2) // step] = xtotal
+            if x == width:
+                break
+            total += b[y, x]
+            xtotal += x * b[y, x]
+        for c in range(cols):
+            left = 2 + step * c
+            count = row_sum[c + n // step] - row_sum[c]
+            py[y, c] = (row_xsum[c + n // step] - row_xsum[c]) - (left - 1) * count
+    return px, py
+
+
+@numba.njit(cache=True, nogil=True)
+def _cell_histograms(codes, cell, hc, wc):
+    """``hist[code, cy, cx]``: how often each LBP code occurs in each ``cell x cell`` cell (int16)."""
+    hist = np.zeros((N_CODES, hc, wc), np.int16)
+    for y in range(hc * cell):
+        for x in range(wc * cell):
+            hist[codes[y, x], y // cell, x // cell] += 1
+    return hist
+
+
+@numba.njit(cache=True, nogil=True)
+def _evaluate_level(blocks, px, py, m_lbp, m_contour, rows, cols, cells_per_block, x0, y0,
+                    features, thresholds, left, right, ends, stage_thresholds, last_stage_margin):
+    """The cascade over every window of a level (see :meth:`LevelScan.evaluate`).
+
+    Stump j reads raw feature ``features[j]`` of a window: texture bin (block, code) from
+    ``blocks[code]``, contour potential ``P_x(k)`` from ``px`` or ``P_y(k)`` from ``py``; it tests
+    ``255 * value >= thresholds[j] * max`` (eqs. 3-4 without a division) and adds ``right[j]`` when
+    it passes, else ``left[j]``. Stage s spans stumps ``ends[s-1] .. ends[s]-1`` and keeps the windows
+    whose sum reaches its threshold. Stump by stump over the surviving windows, so that each stump
+    streams through one table plane.
+    """
+    alive = np.arange(rows * cols)
+    score = np.zeros(rows * cols)
+    start = 0
+    for s in range(len(ends)):
+        if len(alive) == 0:
+            break
+        total = np.zeros(len(alive))
+        for j in range(start, ends[s]):
+            f, t, lo, hi = features[j], np.float64(thresholds[j]), left[j], right[j]
+            if f < LBP_DIM:
+                plane = blocks[f % N_CODES]
+                dy, dx = (f // N_CODES // 2) * cells_per_block, (f // N_CODES % 2) * cells_per_block
+                for a in range(len(alive)):
+                    w = alive[a]
+                    m = m_lbp[w]
+                    value = np.float64(plane[w // cols + dy, w % cols + dx])
+                    total[a] += hi if (m > 0 and 255.0 * value >= t * m) else lo
+            elif f < LBP_DIM + CONTOUR_SIZE:
+                k = f - LBP_DIM
+                for a in range(len(alive)):
+                    w = alive[a]
+                    m = m_contour[w]
+                    value = np.float64(px[w // cols, x0[w % cols] + k])
+                    total[a] += hi if (m > 0 and 255.0 * value >= t * m) else lo
+            else:
+                k = f - LBP_DIM - CONTOUR_SIZE
+                for a in range(len(alive)):
+                    w = alive[a]
+                    m = m_contour[w]
+                    value = np.float64(py[y0[w // cols] + k, w % cols])
+                    total[a] += hi if (m > 0 and 255.0 * value >= t * m) else lo
+        score = total - stage_thresholds[s]
+        keep = score >= (last_stage_margin if s == len(ends) - 1 else 0.0)
+        alive, score = alive[keep], score[keep]
+        start = ends[s]
+    return alive, score

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from multi_target_tracker import features as F
+from multi_target_tracker.cascade import Cascade, Stage
 
 
 def test_lbp_code_hand_computed():
@@ -68,18 +69,24 @@ def test_level_scan_equals_reference_window_by_window(stride):
         y, x = y * stride, x * stride
         ref = F.window_features(gl[y:y + 34, x:x + 34], gc[2 * y + 1:2 * y + 67, 2 * x + 1:2 * x + 67], 12.0)
         assert np.array_equal(F.quantised(ref), vec)
-    features = np.array([7, 255 + 256 * 3, 1024 + 10, 1024 + 100, 3, 1151])
-    for t in (1, 64, 200):
-        thresholds = np.full(len(features), t)
-        assert np.array_equal(scan.passes(features, thresholds, windows), vectors[:, features] >= t)
+    # the compiled cascade loop over the level's tables = the cascade on the reference vectors
+    every = scan.vectors(np.arange(scan.n_windows))
+    for seed in range(3):
+        stages = [_random_stage(np.random.default_rng(100 * stride + 10 * seed + k), every) for k in range(3)]
+        cascade = Cascade((32, 32), "fused", 12.0, stages)
+        for margin in (0.0, -0.5):
+            idx, score = scan.evaluate(cascade.packed(), margin)
+            ref_idx, ref_score = cascade.evaluate_vectors(every, margin)
+            assert 0 < len(ref_idx) < scan.n_windows     # the stages reject some windows and keep some
+            assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
 
 
-def test_feature_sets_and_bad_input():
-    assert len(F.feature_range("lbp")) == 1024 and F.feature_range("contour")[0] == 1024
-    with pytest.raises(F.FeatureError):
-        F.feature_range("hog")
-    with pytest.raises(F.FeatureError):
-        F.LevelScan(np.zeros((50, 50), np.uint8), (40, 40), 3, "fused", 10.0)
-    with pytest.raises(F.FeatureError):
-        F.lbp_codes(np.zeros((10, 10), np.float32))
-    assert F.LevelScan(np.zeros((50, 50), np.uint8), (20, 20), 4, "fused", 10.0).n_windows == 0
+def _random_stage(rng, vectors):
+    """A stage of 12 stumps over texture, P_x and P_y features, split at each feature's median so
+    that it passes some windows and rejects others."""
+    varied = np.flatnonzero(vectors.std(axis=0) > 0)
+    texture, contour = varied[varied < 1024], varied[varied >= 1024]
+    features = np.concatenate([rng.choice(texture, 6, replace=False), rng.choice(contour, 6, replace=False)])
+    thresholds = np.maximum(1, np.median(vectors[:, features], axis=0).astype(int) + 1)
+    left, right = -rng.random(len(features)), rng.random(len(features))
+    return Stage(features, thresholds, left, right, float((left + right).sum() / 2))
