@@ -43,6 +43,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
+from aircraft_docking_tracker.config import from_mapping, load_yaml_parameters, package_config_dir  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
 from multi_target_tracker.detector import MODELS_DIR, Detector, DetectorConfig  # noqa: E402
@@ -116,8 +117,14 @@ def synthetic_items(kind: str, seed: int, frames: int, every: int):
     return out
 
 
-def evaluate_synthetic(model: Path, items) -> dict:
-    det = detector_for(model)
+def setup_detector(setup: str) -> Detector:
+    """The detector as a camera set-up file configures it (``config/<setup>``, over the defaults)."""
+    params = {**load_yaml_parameters(package_config_dir() / "detector.yaml", "detector"),
+              **load_yaml_parameters(package_config_dir() / setup, "detector")}
+    return Detector(from_mapping(DetectorConfig, params, strict=False))
+
+
+def evaluate_synthetic(det: Detector, items) -> dict:
     acc = DetectionAccumulator()
     latencies = []
     for gray, boxes, ignore in items:
@@ -189,6 +196,7 @@ def main() -> int:
         at10 = {"detection_rate": float(recall[ok].max()) if len(ok) else 0.0,
                 "score_threshold": float(score[ok[np.argmax(recall[ok])]]) if len(ok) else None}
         entry = {"model": str(model), "stages": len(info["stages"]),
+                 "train_seconds": info.get("info", {}).get("train_seconds"),
                  "best_at_10pct_false_alarms": at10,
                  "stumps": sum(len(s["features"]) for s in info["stages"]),
                  "operating_point": {k: v for k, v in op.items() if not k.startswith("pr_")},
@@ -219,11 +227,11 @@ def main() -> int:
         results["detectors"]["OpenCV CascadeClassifier (cars.xml)"] = entry
 
     results["synthetic"] = {}
-    for kind, model, seed, frames_, every in (("uav", "uav_vehicles_fused.json", 106, 40, 8 if args.quick else 4),
-                                              ("docking", "docking_aircraft_fused.json", 105, 120, 12 if args.quick else 4)):
-        if (MODELS_DIR / model).is_file():
-            results["synthetic"][kind] = {"model": model, "seed": seed,
-                                          **evaluate_synthetic(MODELS_DIR / model, synthetic_items(kind, seed, frames_, every))}
+    for kind, setup, seed, frames_, every in (("uav", "uav_camera.yaml", 106, 40, 8 if args.quick else 4),
+                                              ("docking", "stand_camera.yaml", 105, 120, 12 if args.quick else 4)):
+        det = setup_detector(setup)
+        results["synthetic"][kind] = {"model": Path(det.config.model).name, "setup": setup, "seed": seed,
+                                      **evaluate_synthetic(det, synthetic_items(kind, seed, frames_, every))}
 
     (HERE / "results").mkdir(exist_ok=True)
     (HERE / "plots").mkdir(exist_ok=True)
@@ -243,14 +251,15 @@ def markdown(results: dict, quick: bool) -> str:
             "The column at <= 10 % false alarms reads the validation PR curve at its best threshold on the "
             "detection score (an oracle choice, shown with that threshold; the operating point columns use the defaults). "
             "Speed: `Detector.detect` alone, one thread.", "",
-            "| detector | stages / stumps | detection rate | false-alarm rate | AP | detection rate at <= 10 % false alarms (threshold) | frames/s 640x480 | 640x640 | 1280x720 |",
-            "|---|---|---|---|---|---|---|---|---|"]
+            "| detector | stages / stumps | training [s] | detection rate | false-alarm rate | AP | detection rate at <= 10 % false alarms (threshold) | frames/s 640x480 | 640x640 | 1280x720 |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     base = None
     for name, e in results["detectors"].items():
         speed = lambda key: f"{e[key]['fps']:.1f}" if key in e else "-"  # noqa: E731
         if "operating_point" in e:
             op, opa = e["operating_point"], e["operating_point_all_boxes"]
-            rows.append(f"| {name} | {e['stages']} / {e['stumps']} | {op['detection_rate']:.3f} "
+            trained = f"{e['train_seconds']:.0f}" if e.get("train_seconds") else "-"
+            rows.append(f"| {name} | {e['stages']} / {e['stumps']} | {trained} | {op['detection_rate']:.3f} "
                         f"({opa['detection_rate']:.3f}) | {op['false_alarm_rate']:.3f} ({opa['false_alarm_rate']:.3f}) | "
                         f"{e['average_precision']:.3f} ({e['average_precision_all_boxes']:.3f}) | "
                         f"{e['best_at_10pct_false_alarms']['detection_rate']:.3f} "
@@ -259,7 +268,7 @@ def markdown(results: dict, quick: bool) -> str:
             if name == "cascade (fused)":
                 base = e
         else:
-            rows.append(f"| {name} | - | - | - | - | - | {speed('speed_640x480')} | {speed('speed_640x640')} | "
+            rows.append(f"| {name} | - | - | - | - | - | - | {speed('speed_640x480')} | {speed('speed_640x640')} | "
                         f"{speed('speed_1280x720')} |")
     cv = results["detectors"].get("OpenCV CascadeClassifier (cars.xml)")
     if base and cv:
@@ -268,11 +277,11 @@ def markdown(results: dict, quick: bool) -> str:
                  f"cars.xml on video1.avi 320x240 (its own setting, scale 1.1): "
                  f"{cv['speed_320x240_video1']['fps']:.1f} frames/s."]
     if results.get("synthetic"):
-        rows += ["", "Synthetic scenes (held-out seeds, shipped models, trained cascade):", "",
-                 "| scene | model | frames | detection rate | false-alarm rate | detections / frame | frames/s |",
+        rows += ["", "Synthetic scenes (held-out seeds, shipped models, each camera set-up's detector parameters):", "",
+                 "| scene | model (set-up) | frames | detection rate | false-alarm rate | detections / frame | frames/s |",
                  "|---|---|---|---|---|---|---|"]
         for kind, e in results["synthetic"].items():
-            rows.append(f"| {kind} seed {e['seed']} | {e['model']} | {e['frames']} | {e['detection_rate']:.3f} | "
+            rows.append(f"| {kind} seed {e['seed']} | {e['model']} ({e.get('setup', '-')}) | {e['frames']} | {e['detection_rate']:.3f} | "
                         f"{e['false_alarm_rate']:.3f} | {e['detections'] / max(e['frames'], 1):.1f} | {e['fps']:.1f} |")
     if results.get("train_seconds"):
         rows += ["", "Training time [s]: " + ", ".join(f"{k} {v:.0f}" for k, v in results["train_seconds"].items())]

@@ -213,7 +213,7 @@ class LevelScan:
         self.m_lbp = np.max([block_max[dy // s:dy // s + r, dx // s:dx // s + c] for dy, dx in BLOCK_OFFSETS],
                             axis=0).reshape(-1).astype(np.int64)
 
-    # --- contour: potential maps from integral images, per-window maximum by sliding max (eq. 4)
+    # --- contour: potential maps from prefix sums, per-window maximum by sliding max (eq. 4)
     def _contour(self, gray_c: np.ndarray, edge_threshold: float) -> None:
         n, s2 = CONTOUR_SIZE, 2 * self.stride
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
