@@ -72,6 +72,8 @@ def read_yolo_folder(folder: str | Path, include: list[str] | None = None, exclu
                      classes: list[int] | None = None) -> list[LabelledImage]:
     """A YOLO folder (``images/`` and ``labels/`` side by side); file-name prefix filters for splits."""
     folder = Path(folder)
+    if not folder.is_dir():
+        raise TrainingDataError(f"YOLO folder {folder} not found")
     images_dir = folder / "images" if (folder / "images").is_dir() else folder
     labels_dir = folder / "labels" if (folder / "labels").is_dir() else folder
     out = []
@@ -198,12 +200,16 @@ FLIPS = {"none": [], "h": [1], "v": [0], "hv": [1, 0, -1]}
 def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature_set: str, edge_threshold: float,
                      rotate90: bool, flips: str, keep_truncated: bool = False, max_positives: int = 0,
                      rng: np.random.Generator | None = None, jitter: int = 0,
-                     jitter_shift: float = 0.0625, jitter_scale: float = 1.1) -> tuple[np.ndarray, np.ndarray]:
+                     jitter_shift: float = 0.0625, jitter_scale: float = 1.1,
+                     positive_aspect: str = "box") -> tuple[np.ndarray, np.ndarray]:
     """Vectors of every usable box (turned to the window's orientation when ``rotate90``) and its flips,
     and the window-orientation heights of the boxes used.
 
     ``jitter`` extra copies per view are shifted by up to ``jitter_shift`` of the box size and scaled
     by up to ``jitter_scale``: the scan meets objects only on its stride grid and scale steps.
+    ``positive_aspect`` "window" reshapes every box to the window's shape (same centre and area)
+    before cutting it: the scan only ever shows the cascade windows of that shape, so boxes of
+    other shapes (e.g. vehicles at any heading) would teach it views it never meets.
     """
     rng = rng or np.random.default_rng(0)
     wide = window[0] >= window[1]
@@ -218,6 +224,9 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
             if rotate90 and (box[2] >= box[3]) != wide:
                 views = [(np.ascontiguousarray(gray.T), box[[1, 0, 3, 2]])]
             g, b = views[0]
+            if positive_aspect == "window":
+                b = window_shaped(b, window)
+                views = [(g, b)]
             heights.append(b[3])
             views += [(cv2.flip(g, code), _flip_box(b, code, g.shape)) for code in FLIPS[flips]]
             for g, b in views:
@@ -235,6 +244,15 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
     if max_positives and len(x) > max_positives:
         x = x[np.sort(rng.choice(len(x), max_positives, replace=False))]
     return x, np.asarray(heights, float)
+
+
+def window_shaped(box, window: tuple[int, int]) -> np.ndarray:
+    """``box`` (x, y, w, h) reshaped to the aspect of ``window`` (w, h), same centre and area."""
+    x, y, w, h = (float(v) for v in box)
+    aspect = window[0] / window[1]
+    height = math.sqrt(max(w * h, 0.0) / aspect)
+    width = aspect * height
+    return np.array([x + (w - width) / 2, y + (h - height) / 2, width, height])
 
 
 def _flip_box(box, code: int, shape) -> np.ndarray:
@@ -349,6 +367,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotate90", action="store_true", help="objects appear turned by 90 degrees too: "
                    "train on boxes turned to the window's orientation, detect on the frame and its transpose")
     p.add_argument("--flips", choices=sorted(FLIPS), default="h", help="mirror augmentations of positives")
+    p.add_argument("--positive-aspect", choices=("box", "window"), default="box",
+                   help="cut positives as labelled (box) or reshaped to the window's shape, same centre and area "
+                   "(window: for objects whose boxes vary in shape, e.g. vehicles at any heading)")
     p.add_argument("--keep-truncated", action="store_true", help="also use boxes cut by the frame border")
     p.add_argument("--jitter", type=int, default=2, help="randomly shifted/scaled copies per positive view")
     p.add_argument("--max-positives", type=int, default=0, help="subsample positives to this many (0: all)")
@@ -390,9 +411,14 @@ def run(args) -> Cascade:
     say = lambda msg: print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)  # noqa: E731
     xp, heights = positive_vectors(data, window, cfg.feature_set, args.edge_threshold, args.rotate90,
                                    args.flips, args.keep_truncated, args.max_positives, rng, args.jitter,
-                                   args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5)
+                                   args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5, args.positive_aspect)
     say(f"{len(data)} images, {len(xp)} positive vectors")
     min_size = args.min_size or (float(np.percentile(heights, 2)) * 0.85 if len(heights) else 0.0)
+    if 0 < min_size < window[1]:   # the scan never looks at windows smaller than the model's
+        small = float(np.mean(heights < window[1])) if len(heights) else 0.0
+        say(f"warning: {100 * small:.0f} % of the boxes are lower than the {window[1]} px window: they are "
+            f"searched at {window[1]} px only (train with a smaller --window to find them at their size)")
+        min_size = float(window[1])
     max_size = args.max_size or (float(np.percentile(heights, 98)) * 1.15 if len(heights) else 0.0)
     negatives = [p for folder in args.negative_images for p in sorted(Path(folder).iterdir())
                  if p.suffix.lower() in IMAGE_SUFFIXES]
@@ -403,7 +429,8 @@ def run(args) -> Cascade:
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     info = {"data": [str(p) for p in args.yolo + args.voc + args.bag],
             "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
-            "flips": args.flips, "jitter": args.jitter, "search_min_size": min_size, "search_max_size": max_size}
+            "flips": args.flips, "jitter": args.jitter, "positive_aspect": args.positive_aspect,
+            "search_min_size": min_size, "search_max_size": max_size}
 
     def save(cascade: Cascade) -> None:  # after every stage: an interrupted run still leaves a model
         cascade.info.update(info, train_seconds=round(time.perf_counter() - t0, 1))
@@ -420,7 +447,7 @@ def main(args=None) -> int:
     parsed = build_parser().parse_args(args)
     try:
         run(parsed)
-    except (TrainingDataError, ValueError) as exc:
+    except (TrainingDataError, ValueError, OSError) as exc:
         print(f"train_cascade: {exc}", file=sys.stderr)
         return 2
     return 0

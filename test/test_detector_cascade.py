@@ -8,7 +8,7 @@ import pytest
 from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
 from multi_target_tracker.cascade import Cascade, CascadeError, CascadeTrainConfig, Stage, train_cascade
 from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_windows, suppress_contained
-from multi_target_tracker.train_cascade import LabelledImage, NegativeMiner, positive_vectors
+from multi_target_tracker.train_cascade import LabelledImage, NegativeMiner, positive_vectors, window_shaped
 
 WINDOW = (48, 24)
 
@@ -185,3 +185,42 @@ def test_negative_pool_replaces_image_scans_once_small(tiny_model):
     scanning = NegativeMiner(data, [], scan, False, 0.3, np.random.default_rng(0), pool_size=0)
     scanning(one_stage, 50)
     assert scanning.pool is None                         # pool_size 0: every stage scans images
+
+
+def test_positives_reshaped_to_the_window():
+    # a 40x40 box reshaped to a 2:1 window keeps its centre (30, 40) and area 1600
+    assert window_shaped([10, 20, 40, 40], (64, 32)) == pytest.approx([30 - 28.2843, 40 - 14.1421, 56.5685, 28.2843],
+                                                                     abs=1e-3)
+    image = np.full((120, 160), 90, np.uint8)
+    cv2.rectangle(image, (50, 40), (89, 79), 200, -1)
+    data = [LabelledImage("square", lambda: image, np.array([[50.0, 40.0, 40.0, 40.0]]))]
+    as_box, heights_box = positive_vectors(data, (64, 32), "fused", 40.0, False, "none")
+    as_window, heights_window = positive_vectors(data, (64, 32), "fused", 40.0, False, "none",
+                                                 positive_aspect="window")
+    assert heights_box.tolist() == [40.0] and heights_window == pytest.approx([28.2843], abs=1e-3)
+    assert len(as_box) == len(as_window) == 1 and not np.array_equal(as_box, as_window)
+
+
+def test_train_cascade_command_on_a_yolo_folder(tmp_path, capsys):
+    from multi_target_tracker.train_cascade import main as train_main
+
+    rng = np.random.default_rng(11)
+    (tmp_path / "images").mkdir()
+    (tmp_path / "labels").mkdir()
+    for k in range(8):
+        image, boxes = _scene(rng, 3)
+        cv2.imwrite(str(tmp_path / "images" / f"a_{k}.png"), image)
+        h, w = image.shape
+        rows = [f"0 {(x + bw / 2) / w:.6f} {(y + bh / 2) / h:.6f} {bw / w:.6f} {bh / h:.6f}" for x, y, bw, bh in boxes]
+        (tmp_path / "labels" / f"a_{k}.txt").write_text("\n".join(rows) + "\n")
+    model = tmp_path / "model.json"
+    # a 60x30 window is larger than every 44..56 x 22..28 box: the trainer says so and searches from 30 px
+    code = train_main(["--yolo", str(tmp_path), "--window", "60", "30", "--stages", "2", "--negatives", "100",
+                       "--max-stumps", "5", "--positive-aspect", "window", "--output", str(model)])
+    assert code == 0
+    said = capsys.readouterr().out
+    assert "lower than the 30 px window" in said and "stage 2/2" in said
+    cascade = Cascade.load(model)
+    assert len(cascade.stages) == 2 and cascade.window == (60, 30)
+    assert cascade.info["positive_aspect"] == "window" and cascade.info["search_min_size"] == 30.0
+    assert train_main(["--yolo", str(tmp_path / "missing"), "--output", str(model)]) == 2
