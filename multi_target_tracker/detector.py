@@ -28,6 +28,7 @@ detection at <= 10 % false alarms from 70 % to 91 % with the same cascade (bench
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,6 +76,8 @@ class DetectorConfig:
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
+    threads: int = param(1, "pyramid levels scanned at once (the compiled loops release the GIL; 1: one core)",
+                         low=1, high=16)
 
 
 def resolve_model(name: str) -> Path:
@@ -116,6 +119,27 @@ def window_scales(window: tuple[int, int], frame_size: tuple[int, int], scale_fa
     return scales
 
 
+def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4, last_stage_margin: float = 0.0,
+               with_vectors: bool = False, select=None):
+    """The windows of one pyramid level (window = ``scale * cascade.window`` px) that the cascade passes:
+    ``(boxes (n,4) xywh, scores, vectors|None)``. ``select(boxes) -> indices`` (training) picks which
+    are returned."""
+    height, width = gray.shape
+    w0, h0 = cascade.window
+    level = (int(round(width * LBP_SIZE / (w0 * scale))), int(round(height * LBP_SIZE / (h0 * scale))))
+    scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold)
+    idx, score = (scan.evaluate(cascade.packed(), last_stage_margin) if scan.n_windows
+                  else (np.zeros(0, np.int64), np.zeros(0)))
+    fx, fy = width / max(level[0], 1), height / max(level[1], 1)
+    origin = scan.window_origins()[idx] if len(idx) else np.zeros((0, 2))
+    boxes = np.column_stack([origin[:, 0] * fx, origin[:, 1] * fy,
+                             np.full(len(idx), LBP_SIZE * fx), np.full(len(idx), LBP_SIZE * fy)]).reshape(-1, 4)
+    if select is not None and len(idx):
+        chosen = np.asarray(select(boxes), int)
+        idx, score, boxes = idx[chosen], score[chosen], boxes[chosen]
+    return boxes, score, (scan.vectors(idx) if with_vectors else None)
+
+
 def scan_cascade(gray: np.ndarray, cascade: Cascade, scale_factor: float = 1.2, stride: int = 4,
                  min_size: float = 0.0, max_size: float = 0.0, last_stage_margin: float = 0.0,
                  with_vectors: bool = False, select=None):
@@ -125,31 +149,17 @@ def scan_cascade(gray: np.ndarray, cascade: Cascade, scale_factor: float = 1.2, 
     ``select(boxes) -> indices`` (training) picks which passing windows of a level are returned.
     """
     height, width = gray.shape
-    w0, h0 = cascade.window
-    boxes, scores, vectors = [], [], []
-    for s in window_scales(cascade.window, (width, height), scale_factor, min_size, max_size):
-        level = (int(round(width * LBP_SIZE / (w0 * s))), int(round(height * LBP_SIZE / (h0 * s))))
-        scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold)
-        if scan.n_windows == 0:
-            continue
-        idx, score = scan.evaluate(cascade.packed(), last_stage_margin)
-        if len(idx) == 0:
-            continue
-        fx, fy = width / level[0], height / level[1]
-        origin = scan.window_origins()[idx]
-        level_boxes = np.column_stack([origin[:, 0] * fx, origin[:, 1] * fy,
-                                       np.full(len(idx), LBP_SIZE * fx), np.full(len(idx), LBP_SIZE * fy)])
-        if select is not None:
-            chosen = np.asarray(select(level_boxes), int)
-            idx, score, level_boxes = idx[chosen], score[chosen], level_boxes[chosen]
-        boxes.append(level_boxes)
-        scores.append(score)
-        if with_vectors:
-            vectors.append(scan.vectors(idx))
-    if not boxes:
+    levels = [scan_level(gray, cascade, scale, stride, last_stage_margin, with_vectors, select)
+              for scale in window_scales(cascade.window, (width, height), scale_factor, min_size, max_size)]
+    return merge_levels(levels, with_vectors)
+
+
+def merge_levels(levels: list, with_vectors: bool):
+    """:func:`scan_level` results, in order, as one ``(boxes, scores, vectors|None)``."""
+    if not levels:
         return np.zeros((0, 4)), np.zeros(0), (np.zeros((0, 1152), np.uint8) if with_vectors else None)
-    return (np.vstack(boxes), np.concatenate(scores),
-            np.vstack(vectors) if with_vectors else None)
+    boxes, scores, vectors = zip(*levels)
+    return np.vstack(boxes), np.concatenate(scores), (np.vstack(vectors) if with_vectors else None)
 
 
 def containment_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -234,20 +244,25 @@ class Detector:
         if orientation == "model":
             orientation = "both" if (self.cascade is not None and self.cascade.rotate90) else "upright"
         self.both_orientations = orientation == "both"
+        self.pool = ThreadPoolExecutor(cfg.threads, "detector") if cfg.threads > 1 else None
 
     def raw(self, gray: np.ndarray, last_stage_margin: float | None = None):
         """Ungrouped windows ``(boxes, scores)`` in ``gray``'s pixels, both orientations if configured."""
         cfg = self.config
         margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
         views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
+        if self.cascade is not None:   # every (view, level) is one job; merged in job order either way
+            jobs = [(view, transposed, scale) for view, transposed in views
+                    for scale in window_scales(self.window, view.shape[::-1], cfg.scale_factor, self.min_size,
+                                               self.max_size)]
+            scan = lambda job: scan_level(job[0], self.cascade, job[2], cfg.stride, margin)  # noqa: E731
+            levels = list(self.pool.map(scan, jobs) if self.pool is not None else map(scan, jobs))
+            boxes = [b[:, [1, 0, 3, 2]] if job[1] else b for job, (b, _, _) in zip(jobs, levels)]
+            return (np.vstack(boxes) if boxes else np.zeros((0, 4)),
+                    np.concatenate([sc for _, sc, _ in levels]) if levels else np.zeros(0))
         all_boxes, all_scores = [], []
         for view, transposed in views:
-            if self.cascade is not None:
-                boxes, scores, _ = scan_cascade(view, self.cascade, cfg.scale_factor, cfg.stride,
-                                                self.min_size, self.max_size, margin)
-            else:
-                boxes, scores = self.opencv.detect(view, cfg.scale_factor, cfg.min_neighbors,
-                                                   self.min_size, self.max_size)
+            boxes, scores = self.opencv.detect(view, cfg.scale_factor, cfg.min_neighbors, self.min_size, self.max_size)
             if transposed:
                 boxes = boxes[:, [1, 0, 3, 2]]
             all_boxes.append(boxes)

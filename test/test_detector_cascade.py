@@ -224,3 +224,11 @@ def test_train_cascade_command_on_a_yolo_folder(tmp_path, capsys):
     assert len(cascade.stages) == 2 and cascade.window == (60, 30)
     assert cascade.info["positive_aspect"] == "window" and cascade.info["search_min_size"] == 30.0
     assert train_main(["--yolo", str(tmp_path / "missing"), "--output", str(model)]) == 2
+
+
+def test_threads_give_the_same_detections(tiny_model):
+    path, _ = tiny_model
+    image, _ = _scene(np.random.default_rng(5), 3)
+    one = Detector(DetectorConfig(model=str(path), **TINY_DETECTOR, orientation="both")).detect(image)
+    two = Detector(DetectorConfig(model=str(path), **TINY_DETECTOR, orientation="both", threads=2)).detect(image)
+    assert len(one) > 0 and np.array_equal(one, two)
