@@ -7,7 +7,7 @@ Scan (seed 003 §2: "run over the frame to search for targets"): the model windo
 pixels is searched at scales ``s = s_min * scale_factor^k`` between ``min_size`` and ``max_size``
 (window heights in pixels). At each scale the frame is resized so that one window becomes 32x32
 (texture level; the contour level is twice that) and every window on a ``stride``-pixel grid of
-that level is scored at once by :class:`features.LevelScan` and :meth:`Cascade.evaluate`.
+that level is scored at once by :class:`features.LevelScan` (its tables and compiled cascade loop).
 With ``orientation = both`` the transposed frame is scanned too (objects turned by 90 degrees,
 e.g. cars along the other street axis seen from a UAV).
 
@@ -171,18 +171,21 @@ def containment_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return inter / np.maximum(smaller, 1e-12)
 
 
-def suppress_contained(boxes: np.ndarray, scores: np.ndarray, containment: float) -> np.ndarray:
+def suppress_contained(boxes: np.ndarray, scores: np.ndarray, containment: float,
+                       limit: int | None = None) -> np.ndarray:
     """Indices of the boxes kept, best score first, dropping each box lying ``containment`` inside a
-    better kept one (intersection over the smaller area)."""
+    better kept one (intersection over the smaller area); at most ``limit`` (memory: boxes x kept)."""
     order = np.argsort(-scores, kind="stable")
+    limit = len(order) if limit is None else limit
     if containment >= 1.0 or len(order) < 2:
-        return order
-    inside = containment_matrix(boxes[order], boxes[order]) >= containment
+        return order[:limit]
     kept: list[int] = []
-    for k in range(len(order)):
-        if not inside[k, kept].any():
-            kept.append(k)
-    return order[kept]
+    for k in order:
+        if len(kept) >= limit:
+            break
+        if not kept or not (containment_matrix(boxes[k:k + 1], boxes[kept])[0] >= containment).any():
+            kept.append(int(k))
+    return np.asarray(kept, int)
 
 
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
@@ -212,7 +215,7 @@ def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     if not group_boxes:
         return np.zeros((0, 4)), np.zeros(0)
     group_boxes, group_scores = np.asarray(group_boxes), np.asarray(group_scores)
-    keep = suppress_contained(group_boxes, group_scores, containment)[:max_detections]
+    keep = suppress_contained(group_boxes, group_scores, containment, max_detections)
     return group_boxes[keep], group_scores[keep]
 
 
@@ -288,7 +291,7 @@ class Detector:
             boxes, scores = group_windows(boxes, scores, cfg.group_iou, cfg.min_neighbors, cfg.containment,
                                           cfg.max_detections)
         else:  # OpenCV grouped already (minNeighbors); the two orientations only need merging
-            keep = suppress_contained(boxes, scores, cfg.containment)[:cfg.max_detections]
+            keep = suppress_contained(boxes, scores, cfg.containment, cfg.max_detections)
             boxes, scores = boxes[keep], scores[keep]
         out = np.zeros(len(boxes), DETECTION_DTYPE)
         out["x"], out["y"] = boxes[:, 0] + x0, boxes[:, 1] + y0

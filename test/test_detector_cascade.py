@@ -232,3 +232,9 @@ def test_threads_give_the_same_detections(tiny_model):
     one = Detector(DetectorConfig(model=str(path), **TINY_DETECTOR, orientation="both")).detect(image)
     two = Detector(DetectorConfig(model=str(path), **TINY_DETECTOR, orientation="both", threads=2)).detect(image)
     assert len(one) > 0 and np.array_equal(one, two)
+
+
+def test_contained_suppression_stops_at_the_limit():
+    boxes = np.array([[100.0 * k, 0, 40, 20] for k in range(10)])
+    assert suppress_contained(boxes, np.arange(10.0), 0.4, limit=3).tolist() == [9, 8, 7]
+    assert suppress_contained(boxes, np.arange(10.0), 1.0, limit=3).tolist() == [9, 8, 7]
