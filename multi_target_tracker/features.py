@@ -287,7 +287,7 @@ def _contour_potentials(gray, edge_threshold, step, rows, cols, n):
     sums are kept only where windows start and end (every ``step`` pixels, as ``n`` is a multiple).
     """
     height, width = gray.shape
-    b = np.zeros((height, width), np.int64)
+    b = np.zeros((height, width), np.uint8)
     for y in range(1, height - 1):
         for x in range(1, width - 1):
             lap = (np.int64(gray[y - 1, x]) + gray[y + 1, x] + gray[y, x - 1] + gray[y, x + 1]
