@@ -218,7 +218,10 @@ class LevelScan:
         n, s2 = CONTOUR_SIZE, 2 * self.stride
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
         x0 = 2 + s2 * np.arange(self.cols)
-        self.px, self.py = _contour_potentials(_gray(gray_c), float(edge_threshold), s2, len(y0), len(x0), n)
+        b = contour_image(gray_c, edge_threshold)
+        b[0, :] = b[-1, :] = 0   # the outermost pixels have no full Laplacian neighbourhood
+        b[:, 0] = b[:, -1] = 0
+        self.px, self.py = _contour_potentials(b, s2, len(y0), len(x0), n)
         run_x = cv2.dilate(self.px, np.ones((1, n), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         run_y = cv2.dilate(self.py, np.ones((n, 1), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
@@ -276,24 +279,17 @@ def quantised(vector: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _contour_potentials(gray, edge_threshold, step, rows, cols, n):
+def _contour_potentials(b, step, rows, cols, n):
     """``P_x`` of every column below each window top row ``y0 = 2 + step * r`` (``(rows, W)``) and ``P_y``
     of every row right of each window left column ``x0 = 2 + step * c`` (``(H, cols)``), float32.
 
-    ``b`` is :func:`contour_image` with the frame's outer pixels cleared (3x3 Laplacian, kernel
-    ``[[0,1,0],[1,-4,1],[0,1,0]]``). With prefix sums over ``y' < y`` of ``b`` and ``y' b`` down each
-    column, ``P_x(j) = sum_i b(y0+i, X)(n - i) = (n + y0) sum_Y b - sum_Y Y b`` over rows ``y0 .. y0+n-1``;
-    along each row ``P_y(i) = sum_X X b - (x0 - 1) sum_X b`` over columns ``x0 .. x0+n-1``. The prefix
-    sums are kept only where windows start and end (every ``step`` pixels, as ``n`` is a multiple).
+    ``b`` is the level's :func:`contour_image` with its outer pixels cleared. With prefix sums over
+    ``y' < y`` of ``b`` and ``y' b`` down each column, ``P_x(j) = sum_i b(y0+i, X)(n - i) =
+    (n + y0) sum_Y b - sum_Y Y b`` over rows ``y0 .. y0+n-1``; along each row ``P_y(i) = sum_X X b -
+    (x0 - 1) sum_X b`` over columns ``x0 .. x0+n-1``. The prefix sums are kept only where windows
+    start and end (every ``step`` pixels, as ``n`` is a multiple).
     """
-    height, width = gray.shape
-    b = np.zeros((height, width), np.uint8)
-    for y in range(1, height - 1):
-        for x in range(1, width - 1):
-            lap = (np.int64(gray[y - 1, x]) + gray[y + 1, x] + gray[y, x - 1] + gray[y, x + 1]
-                   - 4 * np.int64(gray[y, x]))
-            if abs(lap) > edge_threshold:
-                b[y, x] = 1
+    height, width = b.shape
     marks, xmarks = rows + n // step, cols + n // step   # prefix rows 2, 2 + step, ...; columns alike
     col_sum = np.zeros((marks, width), np.int64)
     col_ysum = np.zeros((marks, width), np.int64)
