@@ -354,19 +354,17 @@ def plot(results: dict, scale: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
+    from aircraft_docking_tracker.evaluation.plots import grouped_bars  # noqa: PLC0415
+
     plots = HERE / "plots"
     plots.mkdir(parents=True, exist_ok=True)
     seqs = list(results)
     names = list(next(iter(results.values())))
     fig, axes = plt.subplots(1, 2, figsize=(16, 5), sharey=False)
-    width = 0.8 / len(names)
     colors = plt.cm.tab20(np.linspace(0, 1, 20))
     for ax, key in zip(axes, ("mota", "idf1")):
-        for i, name in enumerate(names):
-            vals = [results[s].get(name, {}).get(key, np.nan) for s in seqs]
-            ax.bar(np.arange(len(seqs)) + i * width, vals, width, label=name, color=colors[i % 20])
-        ax.set_xticks(np.arange(len(seqs)) + 0.4 - width / 2)
-        ax.set_xticklabels(seqs)
+        grouped_bars(ax, seqs, {name: [results[s].get(name, {}).get(key, np.nan) for s in seqs] for name in names},
+                     colors)
         ax.set_title(key.upper() + (" (clipped at -20)" if key == "mota" else ""))
         ax.set_ylim(-20 if key == "mota" else 0, 100)
         ax.axhline(0, color="k", lw=0.5)

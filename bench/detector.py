@@ -45,6 +45,7 @@ sys.path.insert(0, str(REPO))
 
 from aircraft_docking_tracker.config import from_mapping, load_yaml_parameters, package_config_dir  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
+from aircraft_docking_tracker.evaluation.plots import grouped_bars  # noqa: E402
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
 from multi_target_tracker.detector import MODELS_DIR, Detector, DetectorConfig  # noqa: E402
 from multi_target_tracker.train_cascade import main as train_main  # noqa: E402
@@ -319,13 +320,10 @@ def plots(results: dict) -> None:
     names = list(results["detectors"])
     keys = ["speed_640x480", "speed_640x640", "speed_1280x720"]
     fig, ax = plt.subplots(figsize=(6.5, 3.8))
-    width = 0.8 / len(keys)
-    for k, key in enumerate(keys):
-        vals = [results["detectors"][n].get(key, {}).get("fps", 0.0) for n in names]
-        ax.bar(np.arange(len(names)) + k * width, vals, width, label=key.replace("speed_", ""))
+    grouped_bars(ax, [n.replace("OpenCV CascadeClassifier", "OpenCV") for n in names],
+                 {key.replace("speed_", ""): [results["detectors"][n].get(key, {}).get("fps", 0.0) for n in names]
+                  for key in keys}, fontsize=8)
     ax.axhline(15, color="k", lw=0.8, ls="--")
-    ax.set_xticks(np.arange(len(names)) + width)
-    ax.set_xticklabels([n.replace("OpenCV CascadeClassifier", "OpenCV") for n in names], fontsize=8)
     ax.set_ylabel("frames/s, one thread")
     ax.legend(fontsize=8)
     fig.tight_layout()

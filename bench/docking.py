@@ -331,6 +331,7 @@ def plot(results: dict, labels: list[str]) -> None:
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
     from aircraft_docking_tracker.evaluation.sot_metrics import SUCCESS_THRESHOLDS  # noqa: PLC0415
+    from aircraft_docking_tracker.evaluation.plots import grouped_bars  # noqa: PLC0415
 
     names = list(results)
     cols = min(3, len(names))
@@ -352,11 +353,8 @@ def plot(results: dict, labels: list[str]) -> None:
     fig.savefig(HERE / "plots" / "docking_success.png", dpi=90)
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(8, 4))
-    width = 0.8 / max(len(labels), 1)
-    for k, label in enumerate(labels):
-        vals = [results[n]["trackers"].get(label, {}).get("fps", 0.0) for n in names]
-        ax.bar(np.arange(len(names)) + k * width, vals, width, label=label)
-    ax.set_xticks(np.arange(len(names)) + 0.4 - width / 2, names, rotation=20, fontsize=7, ha="right")
+    grouped_bars(ax, names, {label: [results[n]["trackers"].get(label, {}).get("fps", 0.0) for n in names]
+                             for label in labels}, rotation=20, fontsize=7, ha="right")
     ax.set_ylabel("frames/s (one core, tracker only)")
     ax.set_yscale("log")
     ax.legend(fontsize=6)

@@ -87,6 +87,17 @@ def pr_plot(runs: dict, path: str | Path, title: str = "") -> Path:
     return _save(fig, path)
 
 
+def grouped_bars(ax, groups: list[str], series: dict[str, list[float]], colors=None, **tick_options) -> None:
+    """Side-by-side bars on ``ax``: one group per x tick, one bar per series (in order), the tick
+    labelled with the group at the centre of its bars; ``tick_options`` go to ``set_xticks``."""
+    width = 0.8 / max(len(series), 1)
+    x = np.arange(len(groups))
+    for k, (label, values) in enumerate(series.items()):
+        color = {} if colors is None else {"color": colors[k % len(colors)]}
+        ax.bar(x + k * width, values, width, label=label, **color)
+    ax.set_xticks(x + 0.4 - width / 2, groups, **tick_options)
+
+
 def continuity_bars(runs: dict, path: str | Path, title: str = "") -> Path:
     """Seed 003 Fig. 4: ``runs``: name -> list of ``TargetContinuity``-like dicts, grouped per target."""
     plt = _pyplot()
