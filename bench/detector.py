@@ -43,9 +43,10 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-from aircraft_docking_tracker.config import from_mapping, load_yaml_parameters, package_config_dir  # noqa: E402
+from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
 from aircraft_docking_tracker.evaluation.plots import grouped_bars  # noqa: E402
+from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
 from multi_target_tracker.detector import MODELS_DIR, Detector, DetectorConfig  # noqa: E402
 from multi_target_tracker.train_cascade import main as train_main  # noqa: E402
@@ -119,10 +120,11 @@ def synthetic_items(kind: str, seed: int, frames: int, every: int):
 
 
 def setup_detector(setup: str) -> Detector:
-    """The detector as a camera set-up file configures it (``config/<setup>``, over the defaults)."""
-    params = {**load_yaml_parameters(package_config_dir() / "detector.yaml", "detector"),
-              **load_yaml_parameters(package_config_dir() / setup, "detector")}
-    return Detector(from_mapping(DetectorConfig, params, strict=False))
+    """The detector as a camera set-up file configures it (``config/<setup>``), built as run_offline does."""
+    processor = build_processor("detector", package_config_dir() / setup)
+    if processor.detector is None:
+        raise SystemExit(f"bench/detector.py: {setup}: {processor.model_error}")
+    return processor.detector
 
 
 def evaluate_synthetic(det: Detector, items) -> dict:
