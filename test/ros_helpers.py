@@ -38,3 +38,19 @@ def spin_until(executor, predicate, timeout_s: float = 10.0, step_s: float = 0.0
 
 def wait_for_subscribers(executor, publisher, count: int = 1, timeout_s: float = 10.0) -> bool:
     return spin_until(executor, lambda: publisher.get_subscription_count() >= count, timeout_s)
+
+
+def write_with_rosbags(folder, stamps_ns, texts, topic: str = "/chatter") -> None:
+    """A rosbag2 MCAP bag written by the third-party ``rosbags`` library: std_msgs/String ``texts`` on
+    ``topic`` at ``stamps_ns`` (the test is skipped where rosbags is not installed)."""
+    import pytest  # noqa: PLC0415
+
+    rosbags = pytest.importorskip("rosbags.rosbag2")
+    from rosbags.typesys import Stores, get_typestore  # noqa: PLC0415
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    string_type = store.types["std_msgs/msg/String"]
+    with rosbags.Writer(folder, version=9, storage_plugin=rosbags.StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection(topic, "std_msgs/msg/String", typestore=store)
+        for stamp, text in zip(stamps_ns, texts):
+            writer.write(conn, stamp, store.serialize_cdr(string_type(data=text), "std_msgs/msg/String"))

@@ -12,6 +12,7 @@ from aircraft_docking_tracker.bag import (
     BagError, BagReader, BagWriter, message_definition, ns_to_stamp, recover, stamp_to_ns, type_hash)
 from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
+from ros_helpers import write_with_rosbags
 
 T0 = 1_700_000_000_000_000_000
 
@@ -91,15 +92,7 @@ def test_rosbags_reads_our_file_and_directory(tmp_path):
 
 
 def test_we_read_a_file_that_rosbags_wrote(tmp_path):
-    rosbags = pytest.importorskip("rosbags.rosbag2")
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    String_ = store.types["std_msgs/msg/String"]
-    with rosbags.Writer(tmp_path / "theirs", version=9, storage_plugin=rosbags.StoragePlugin.MCAP) as writer:
-        conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
-        for i in range(5):
-            writer.write(conn, T0 + i, store.serialize_cdr(String_(data=f"hello {i}"), "std_msgs/msg/String"))
+    write_with_rosbags(tmp_path / "theirs", [T0 + i for i in range(5)], [f"hello {i}" for i in range(5)])
     reader = BagReader(tmp_path / "theirs")
     assert reader.topics["/chatter"].count == 5
     assert [m.data for _, m, _ in reader.ros_messages()] == [f"hello {i}" for i in range(5)]

@@ -16,7 +16,7 @@ from aircraft_docking_tracker.mcap_play import Player, PlayOptions
 from aircraft_docking_tracker.mcap_record import Recorder
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
 
-from ros_helpers import ros_context, spin_until, wait_for_subscribers
+from ros_helpers import ros_context, spin_until, wait_for_subscribers, write_with_rosbags
 
 pytestmark = pytest.mark.ros
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -85,16 +85,8 @@ def test_live_record_then_replay_delivers_every_message_intact_and_in_order(tmp_
 
 
 def test_a_rosbags_written_file_plays_onto_live_topics(tmp_path):
-    rosbags = pytest.importorskip("rosbags.rosbag2")
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    StringT = store.types["std_msgs/msg/String"]
-    with rosbags.Writer(tmp_path / "theirs", version=9, storage_plugin=rosbags.StoragePlugin.MCAP) as writer:
-        conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
-        for i in range(10):
-            writer.write(conn, 5_000_000_000 + i * 10_000_000,
-                         store.serialize_cdr(StringT(data=f"from rosbags {i}"), "std_msgs/msg/String"))
+    write_with_rosbags(tmp_path / "theirs", [5_000_000_000 + i * 10_000_000 for i in range(10)],
+                       [f"from rosbags {i}" for i in range(10)])
     with ros_context() as (ctx, executor):
         listener = rclpy.create_node("listener", context=ctx)
         executor.add_node(listener)
