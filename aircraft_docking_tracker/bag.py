@@ -751,10 +751,13 @@ class _McapFile:
             if index.message_index_offsets and not channel_ids.intersection(index.message_index_offsets):
                 continue
             heapq.heappush(heap, (index.message_start_time, 0, k, 0, index))
+        everything = start_ns is None and end_ns is None
+        delivered = 0
         with open(self.path, "rb") as stream:
             while heap:
                 log_time, kind, k, n, payload = heapq.heappop(heap)
                 if kind == 1:
+                    delivered += 1
                     yield payload
                     continue
                 try:
@@ -779,6 +782,10 @@ class _McapFile:
                     continue
                 for entry in batch:
                     heapq.heappush(heap, entry)
+        expected = sum(t.count for name, t in self.topics.items() if topics is None or name in topics)
+        if everything and delivered != expected and self.error is None:
+            # a damaged index or statistics record: the summary promised other messages than were found
+            self.error = f"the summary lists {expected} messages, {delivered} were found"
 
 
 class BagReader:

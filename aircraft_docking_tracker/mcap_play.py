@@ -122,7 +122,9 @@ class Player:
             def bag_ns_at(now: float) -> int:
                 return begin + int((now - wall_start) * rate * 1e9)
 
-            for item in self.reader.messages(topics=topics, start_ns=begin, end_ns=end):
+            # from the bag's very start unless asked otherwise: a damaged summary's start time is no filter
+            first = begin if self.options.start_offset_s > 0 else None
+            for item in self.reader.messages(topics=topics, start_ns=first, end_ns=end):
                 if self._stop.is_set():
                     break
                 target = wall_start + (item.log_time_ns - begin) / 1e9 / rate
