@@ -65,3 +65,45 @@ def test_association_publishes_the_overlay_and_keeps_the_legacy_markers(tmp_path
         bag.write("tracks/image_markers", overlay, 1)
     (_, back, _), = BagReader(tmp_path / "o.mcap").ros_messages()
     assert [(p.x, p.y) for p in back.points] == [(p.x, p.y) for p in overlay.points]
+
+
+def test_the_foxglove_layout_shows_the_demo_recording():
+    """config/foxglove_demo_layout.json: each camera's image with its overlays, and rate / latency plots
+    from /diagnostics of every demo node; every name it uses is one the demo really records."""
+    import json
+    import re
+
+    from aircraft_docking_tracker.offline import processor_spec
+
+    from conftest import REPO
+    from test_demo_report import load_demo
+
+    layout = json.loads((REPO / "config" / "foxglove_demo_layout.json").read_text())
+    panels = layout["configById"]
+
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
+    assert sorted(leaves(layout["layout"])) == sorted(panels)
+    cameras = load_demo().CAMERAS
+    node_of_exe = {"detector_node": "detector", "association_node": "association",
+                   "docking_tracker_node": "docking_tracker"}
+    overlays, nodes = set(), set()
+    for ns, (_, _, _, exes, *_rest) in cameras.items():
+        for exe in exes:
+            name = node_of_exe[exe]
+            nodes.add(f"/{ns}/{name}")
+            processor = processor_spec(name).build(processor_spec(name).configs_from_parameters({}))
+            overlays |= {f"/{ns}/{t}" for t, kind in processor.outputs.items() if kind.endswith("/ImageMarker")}
+    images = [p["imageMode"] for k, p in panels.items() if k.startswith("Image!")]
+    assert {m["imageTopic"] for m in images} == {f"/{ns}/image" for ns in cameras}
+    shown = {t for m in images for t, v in m["annotations"].items()}
+    assert shown <= overlays and {f"/{ns}/docking/image_markers" for ns in ["stand"]} <= shown
+    plotted = set()
+    for key, panel in panels.items():
+        if key.startswith("Plot!"):
+            for path in panel["paths"]:
+                assert path["enabled"] and path["value"].startswith("/diagnostics.status[:]")
+                node, value = re.search(r'hardware_id=="([^"]+)"}\.values\[:\]{key=="([^"]+)"}', path["value"]).groups()
+                plotted.add((node, value))
+    assert {n for n, _ in plotted} == nodes
+    assert {"rate_hz", "latency_ms_p50"} <= {v for _, v in plotted}
