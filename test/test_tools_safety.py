@@ -227,3 +227,14 @@ def test_split_bag_by_duration_through_run_offline_and_the_player(tmp_path):
 def test_split_needs_a_directory_output(tmp_path):
     with pytest.raises(BagError, match="bag directory"):
         BagWriter(tmp_path / "x.mcap", max_bytes=1000)
+
+
+def test_mot_track_refuses_to_write_its_results_over_its_detections(tmp_path, capsys):
+    from multi_target_tracker import mot_track
+
+    det = tmp_path / "det.txt"
+    det.write_text("1,-1,10,10,20,20,0.9,-1,-1,-1\n2,-1,11,10,20,20,0.9,-1,-1,-1\n")
+    before = det.read_bytes()
+    assert mot_track.main([str(det), "-o", str(det)]) == 2
+    assert "would overwrite the input" in capsys.readouterr().err and det.read_bytes() == before
+    assert mot_track.main([str(det), "-o", str(tmp_path / "results.txt")]) == 0
