@@ -238,3 +238,28 @@ def test_mot_track_refuses_to_write_its_results_over_its_detections(tmp_path, ca
     assert mot_track.main([str(det), "-o", str(det)]) == 2
     assert "would overwrite the input" in capsys.readouterr().err and det.read_bytes() == before
     assert mot_track.main([str(det), "-o", str(tmp_path / "results.txt")]) == 0
+
+
+def test_an_atomic_directory_output_replaces_only_the_bags_own_files(tmp_path):
+    src = write_scene_bag(tmp_path / "in.mcap", frames=3)
+    out = tmp_path / "outbag"
+    out.mkdir()
+    (out / "notes.txt").write_text("the operator's notes")
+    (out / "outbag_7.mcap").write_bytes(b"a stale split file of an older run")
+    for _ in range(2):
+        offline.run(src, out, ["docking_tracker"], progress=False)
+    assert sorted(p.name for p in out.iterdir()) == ["metadata.yaml", "notes.txt", "outbag_0.mcap"]
+    assert BagReader(out).topics["/docking/polygon"].count == 3
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+@pytest.mark.ros
+def test_the_player_names_the_repair_of_a_truncated_recording(tmp_path):
+    import subprocess
+    import sys
+
+    cut = killed_copy(chatter_bag(tmp_path / "full.mcap", n=200, chunk_size=500), tmp_path / "killed.mcap")
+    result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.mcap_play", str(cut), "--rate", "100"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert "truncated" in result.stderr and "mcap_record --recover" in result.stderr
