@@ -263,3 +263,20 @@ def test_the_player_names_the_repair_of_a_truncated_recording(tmp_path):
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert "truncated" in result.stderr and "mcap_record --recover" in result.stderr
+
+
+def test_evaluate_warns_on_a_damaged_chunk(tmp_path, capsys):
+    from mcap.reader import SeekingReader
+
+    from aircraft_docking_tracker.evaluation import evaluate
+    from test_fuzz_bags import seed_bag
+
+    bag = seed_bag(tmp_path / "rec.mcap", frames=12, chunk_size=1500)
+    with open(bag, "rb") as stream:
+        chunk = SeekingReader(stream).get_summary().chunk_indexes[3]
+    data = bytearray(bag.read_bytes())
+    data[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0xFF
+    bag.write_bytes(bytes(data))
+    assert evaluate.main([str(bag), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "damaged" in err and "scored what could be read" in err
