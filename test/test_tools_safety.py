@@ -280,3 +280,13 @@ def test_evaluate_warns_on_a_damaged_chunk(tmp_path, capsys):
     assert evaluate.main([str(bag), "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "damaged" in err and "scored what could be read" in err
+
+
+def test_train_cascade_refuses_to_save_its_model_over_a_training_bag(tmp_path, capsys):
+    from multi_target_tracker import train_cascade
+
+    bag = write_scene_bag(tmp_path / "train.mcap", frames=2)
+    before = bag.read_bytes()
+    assert train_cascade.main(["--bag", str(bag), "-o", str(bag)]) == 2
+    assert "would overwrite the input" in capsys.readouterr().err  # refused before any data is read
+    assert bag.read_bytes() == before
