@@ -666,7 +666,7 @@ class _McapFile:
             raise BagError(f"{path}: MCAP profile is {header.profile!r}, not a ROS 2 bag ('ros2')")
         self.topics: dict[str, TopicInfo] = {}
         self._summary = summary
-        if summary is None or not summary.channels or not summary.chunk_indexes:
+        if summary is None or not summary.channels:
             self._summary = None
             self.truncated = True
             self._scan_sequentially()
@@ -677,6 +677,8 @@ class _McapFile:
                 self._add_channel(channel, summary.schemas.get(channel.schema_id), counts.get(channel.id, 0))
             self.start_ns = stats.message_start_time if stats else 0
             self.end_ns = stats.message_end_time if stats else 0
+            if not summary.chunk_indexes:  # no messages, or messages outside chunks: read in file order
+                self._summary = None
 
     def _add_channel(self, channel, schema, count: int) -> None:
         if channel.message_encoding != "cdr":

@@ -290,3 +290,10 @@ def test_train_cascade_refuses_to_save_its_model_over_a_training_bag(tmp_path, c
     assert train_cascade.main(["--bag", str(bag), "-o", str(bag)]) == 2
     assert "would overwrite the input" in capsys.readouterr().err  # refused before any data is read
     assert bag.read_bytes() == before
+
+
+def test_an_empty_recording_is_a_bag_with_topics_and_no_messages(tmp_path):
+    with BagWriter(tmp_path / "empty.mcap") as writer:
+        writer.add_topic("/chatter", "std_msgs/msg/String")
+    reader = BagReader(tmp_path / "empty.mcap")
+    assert reader.topics["/chatter"].count == 0 and list(reader.messages()) == [] and reader.problem is None
