@@ -203,14 +203,18 @@ def run_fuzz(seed: int, budget_s: float, work: Path) -> dict:
     pristine = seed_bag(work / "seed.mcap").read_bytes()
     outcomes: Counter = Counter()
     crashes: list[str] = []
+    pristine_failures: list[str] = []
     slowest = 0.0
-    targets = ["read"] * 6 + ["play"] * 2 + ["offline", "evaluate"]
+    # targets in a fixed cycle (each gets its share however few cases the budget allows)
+    cycle = ["read", "play", "read", "offline", "read", "read", "evaluate", "read", "play", "read"]
     started = time.monotonic()
     n = 0
     while time.monotonic() - started < budget_s:
         kind, data = mutate(pristine, rng)
-        target = rng.choice(targets)
-        if rng.random() < 0.15:  # a split bag: one damaged file, one sound, a damaged metadata.yaml
+        target = cycle[n % len(cycle)]
+        if n % 23 == 0:  # the sound bag now and then: every target must read it whole
+            kind, data = "pristine", pristine
+        if kind != "pristine" and rng.random() < 0.15:  # a split bag: one damaged file, one sound, a damaged metadata.yaml
             path = split_bag(work / f"split_{n % 2}", data, pristine, rng)
             kind = "split/" + kind
         else:
@@ -227,6 +231,8 @@ def run_fuzz(seed: int, budget_s: float, work: Path) -> dict:
             else:
                 result = _evaluate(path)
             outcomes[f"{target}:{result}"] += 1
+            if kind == "pristine" and result != "ok":
+                pristine_failures.append(f"{target}: {result}")
         except Exception as exc:  # noqa: BLE001 - every escape is a finding
             crashes.append(f"{target} on {kind} (case {n}): {type(exc).__name__}: {exc}\n"
                            + "".join(traceback.format_exc(limit=6)))
@@ -234,6 +240,7 @@ def run_fuzz(seed: int, budget_s: float, work: Path) -> dict:
         slowest = max(slowest, time.monotonic() - t0)
         n += 1
     return {"seed": seed, "cases": n, "outcomes": dict(outcomes), "crashes": crashes[:5],
+            "pristine_failures": pristine_failures,
             "crash_count": len(crashes), "slowest_case_s": round(slowest, 3),
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
@@ -246,11 +253,13 @@ def test_mutated_and_random_bags_never_crash_hang_or_blow_up(seed, tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout.strip().splitlines()[-1])
     assert report["crash_count"] == 0, "\n\n".join(report["crashes"])
-    # enough inputs to mean something, and every target both exercised and sometimes refusing
-    assert report["cases"] >= 200, report
+    assert report["pristine_failures"] == [], report
+    # the harness really ran (a floor, not a speed claim: ~1000 cases per seed on an idle machine),
+    # every target was exercised, and damaged input was refused somewhere
+    assert report["cases"] >= 50, report
     for target in ("read", "play", "offline", "evaluate"):
         assert sum(v for k, v in report["outcomes"].items() if k.startswith(target + ":")) >= 5, report
-    assert report["outcomes"].get("read:refused", 0) > 0 and report["outcomes"].get("read:ok", 0) > 0, report
+    assert sum(v for k, v in report["outcomes"].items() if k.endswith(":refused")) > 0, report
     assert report["peak_rss_mb"] < MAX_RSS_MB, report
 
 

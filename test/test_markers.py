@@ -106,4 +106,4 @@ def test_the_foxglove_layout_shows_the_demo_recording():
                 node, value = re.search(r'hardware_id=="([^"]+)"}\.values\[:\]{key=="([^"]+)"}', path["value"]).groups()
                 plotted.add((node, value))
     assert {n for n, _ in plotted} == nodes
-    assert {"rate_hz", "latency_ms_p50"} <= {v for _, v in plotted}
+    assert {"rate_hz", "processing_ms_p50"} <= {v for _, v in plotted}
