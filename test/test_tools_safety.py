@@ -297,3 +297,17 @@ def test_an_empty_recording_is_a_bag_with_topics_and_no_messages(tmp_path):
         writer.add_topic("/chatter", "std_msgs/msg/String")
     reader = BagReader(tmp_path / "empty.mcap")
     assert reader.topics["/chatter"].count == 0 and list(reader.messages()) == [] and reader.problem is None
+
+
+def test_a_killed_recording_is_refused_by_rosbags_until_recovered(tmp_path):
+    """What README and the player's warning say: indexed readers refuse it, --recover repairs it."""
+    rosbags = pytest.importorskip("rosbags.rosbag2")
+
+    cut = killed_copy(chatter_bag(tmp_path / "full.mcap", n=200, chunk_size=500), tmp_path / "killed.mcap")
+    with pytest.raises(Exception, match="magic"):
+        with rosbags.Reader(cut) as reader:
+            list(reader.messages())
+    assert "mcap_record --recover" in BagReader(cut).problem
+    assert mcap_record.main(["--recover", str(cut), str(tmp_path / "fixed.mcap")]) == 0
+    with rosbags.Reader(tmp_path / "fixed.mcap") as reader:
+        assert reader.message_count == BagReader(cut).message_count > 50
