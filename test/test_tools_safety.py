@@ -311,3 +311,17 @@ def test_a_killed_recording_is_refused_by_rosbags_until_recovered(tmp_path):
     assert mcap_record.main(["--recover", str(cut), str(tmp_path / "fixed.mcap")]) == 0
     with rosbags.Reader(tmp_path / "fixed.mcap") as reader:
         assert reader.message_count == BagReader(cut).message_count > 50
+
+
+def test_sot_track_keeps_the_frames_before_an_unreadable_image_file(tmp_path, capsys):
+    import cv2
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k, (frame, _) in enumerate(list(moving_target_scene(40, size=(160, 120)))[:6]):
+        cv2.imwrite(str(folder / f"{k:04d}.png"), frame)
+    (folder / "0004.png").write_bytes(b"\x89PNG\r\n\x1a\n half a file")   # a copy that was cut short
+    out = tmp_path / "boxes.txt"
+    assert sot_track.main([str(folder), "--init", "30,40,40,30", "--out", str(out), "--no-progress"]) == 1
+    assert len(np.loadtxt(out, delimiter=",")) == 4
+    assert "frame 4" in capsys.readouterr().err
