@@ -65,17 +65,17 @@ def test_recorder_cli_splits_by_duration(tmp_path):
         "rclpy.init()\n"
         "n = rclpy.create_node('talker')\n"
         "p = n.create_publisher(String, 'split_chatter', 10)\n"
-        "end = time.monotonic() + 4.5\n"
         "i = 0\n"
-        "while time.monotonic() < end:\n"
+        "while True:\n"
         "    p.publish(String(data=str(i))); i += 1; time.sleep(0.05)\n"
     )
-    talker = subprocess.Popen([sys.executable, "-c", script])
+    talker = subprocess.Popen([sys.executable, "-c", script])  # publishes until stopped
     try:
         result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.mcap_record", "split_chatter",
-                                 "-o", str(out), "--max-bag-duration", "1", "--max-duration", "4"],
+                                 "-o", str(out), "--max-bag-duration", "1", "--max-duration", "6"],
                                 capture_output=True, text=True, timeout=60)
     finally:
+        talker.kill()
         talker.wait(timeout=30)
     assert result.returncode == 0, result.stderr
     files = sorted(out.glob("*.mcap"))
