@@ -802,7 +802,17 @@ class BagReader:
     def __init__(self, path: str | Path):
         self.bag_path = Path(path)
         self.files = bag_files(self.bag_path)
-        self._parts = [_McapFile(f) for f in self.files]
+        self._parts: list[_McapFile] = []
+        self.unreadable_files: list[str] = []  # of a split bag: files that do not open (the others are read)
+        for f in self.files:
+            try:
+                self._parts.append(_McapFile(f))
+            except BagError as exc:
+                if len(self.files) == 1:
+                    raise
+                self.unreadable_files.append(str(exc))
+        if not self._parts:
+            raise BagError(f"{self.bag_path}: no file of the bag can be read ({'; '.join(self.unreadable_files)})")
         self.path = self.files[0] if len(self.files) == 1 else self.bag_path
         self.topics: dict[str, TopicInfo] = {}
         for part in self._parts:
@@ -826,8 +836,8 @@ class BagReader:
 
     @property
     def error(self) -> str | None:
-        errors = [f"{p.path.name}: {p.error}" if len(self._parts) > 1 else p.error
-                  for p in self._parts if p.error]
+        errors = [f"{p.path.name}: {p.error}" if len(self.files) > 1 else p.error
+                  for p in self._parts if p.error] + [f"skipped {e}" for e in self.unreadable_files]
         return "; ".join(errors) if errors else None
 
     @property

@@ -325,3 +325,18 @@ def test_sot_track_keeps_the_frames_before_an_unreadable_image_file(tmp_path, ca
     assert sot_track.main([str(folder), "--init", "30,40,40,30", "--out", str(out), "--no-progress"]) == 1
     assert len(np.loadtxt(out, delimiter=",")) == 4
     assert "frame 4" in capsys.readouterr().err
+
+
+def test_a_split_bag_with_one_unreadable_file_keeps_the_others(tmp_path):
+    folder = tmp_path / "split"
+    write_scene_bag(folder, frames=9, max_duration_ns=3 * STEP)
+    files = sorted(folder.glob("*.mcap"))
+    assert len(files) == 3
+    files[1].write_bytes(b"zeroed by a disk fault" + bytes(100))
+    reader = BagReader(folder)
+    assert reader.topics["/image"].count == 6 and len(list(reader.messages(["/image"]))) == 6
+    assert "split_1.mcap" in reader.problem and "not an MCAP file" in reader.problem
+    for f in (files[0], files[2]):
+        f.write_bytes(b"")
+    with pytest.raises(BagError, match="no file of the bag can be read"):
+        BagReader(folder)
