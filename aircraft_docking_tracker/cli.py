@@ -1,5 +1,31 @@
-"""Command-line helpers shared by the executables that own a ROS context."""
+"""Command-line helpers shared by the executables (ROS argument splitting, safe text outputs)."""
 from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+class AtomicFile:
+    """A text file written under a temporary name beside ``path`` and moved into place by
+    :meth:`close`; :meth:`abort` removes it, so a run that fails leaves the old file (or none)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._partial = self.path.parent / f".{self.path.name}.partial-{os.getpid()}"
+        self._stream = open(self._partial, "w")  # noqa: SIM115 (closed in close() / abort())
+
+    def write(self, text: str) -> int:
+        return self._stream.write(text)
+
+    def close(self) -> None:
+        if not self._stream.closed:
+            self._stream.close()
+            os.replace(self._partial, self.path)
+
+    def abort(self) -> None:
+        if not self._stream.closed:
+            self._stream.close()
+            self._partial.unlink(missing_ok=True)
 
 
 def split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:

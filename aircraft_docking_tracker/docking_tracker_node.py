@@ -14,7 +14,8 @@ Topics (relative names):
   TR, BR, BL of the template; **empty while waiting or lost**;
 * out ``docking/state`` (``PointCloud2``, one ``docking.STATE_DTYPE`` row: cx, cy, scale, aspect,
   rotation, skew, score, particles, state 0 tracking / 1 lost / 2 waiting);
-* out ``docking/markers`` (``MarkerArray``: the quadrilateral, green tracking / red lost, and a
+* out ``docking/image_markers`` (``ImageMarker``: the quadrilateral as an image overlay, same colours);
+* out ``docking/markers`` (legacy ``MarkerArray`` in pixels: the quadrilateral, green tracking / red lost, and a
   label);
 * out ``docking/image`` (bgr8, the quadrilateral and the particles drawn, as the seed's Figs. 2-3),
   only with ``node.annotate_image``.
@@ -82,7 +83,8 @@ class DockingProcessor(MessageProcessor):
                        "docking/init": "geometry_msgs/msg/PolygonStamped"}
         self.outputs = {"docking/polygon": "geometry_msgs/msg/PolygonStamped",
                         "docking/state": "sensor_msgs/msg/PointCloud2",
-                        "docking/markers": "visualization_msgs/msg/MarkerArray"}
+                        "docking/markers": "visualization_msgs/msg/MarkerArray",
+                        "docking/image_markers": "visualization_msgs/msg/ImageMarker"}
         if self.node.annotate_image:
             self.outputs["docking/image"] = "sensor_msgs/msg/Image"
         self.latest_only = frozenset({"image"})
@@ -113,7 +115,7 @@ class DockingProcessor(MessageProcessor):
 
     def _image(self, msg):
         from .images import to_bgr8, to_mono8  # noqa: PLC0415
-        from .markers import delete_all, polygon_marker, text_marker  # noqa: PLC0415
+        from .markers import delete_all, polygon_image_marker, polygon_marker, text_marker  # noqa: PLC0415
         from .scenarios.messages import quad_to_polygon  # noqa: PLC0415
         from visualization_msgs.msg import MarkerArray  # noqa: PLC0415
 
@@ -132,7 +134,10 @@ class DockingProcessor(MessageProcessor):
                                                f"{STATE_NAMES[result.state]} {result.score:.2f}", color))
         out = [("docking/polygon", quad_to_polygon(shown, msg.header)),
                ("docking/state", table_to_cloud(state_row(result), msg.header)),
-               ("docking/markers", markers)]
+               ("docking/markers", markers),
+               ("docking/image_markers", polygon_image_marker(
+                   msg.header, "docking", result.quad if result.matrix is not None else None,
+                   COLORS.get(result.state, COLORS[TRACKING])))]
         if self.node.annotate_image:
             from .images import numpy_to_image  # noqa: PLC0415
 

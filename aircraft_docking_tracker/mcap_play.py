@@ -7,8 +7,10 @@ Messages go out undeserialised, in log-time order, spaced as recorded (divided b
 Each topic is published with the QoS recorded in the file (reliable only if every recorded
 publisher was, transient-local likewise), or reliable depth 10 where none was recorded.
 ``--clock`` publishes ``/clock`` with the bag's time so nodes can run with ``use_sim_time``.
-A missing, non-MCAP or non-ROS file is a clear error; a truncated file plays up to its last
-complete chunk, with a warning.
+A split bag (a rosbag2 directory of several ``.mcap`` files) plays as one. A missing, non-MCAP or
+non-ROS file is a clear error; a truncated file (a recording killed hard) plays up to its last
+complete chunk and a damaged chunk is skipped, each with a warning: ``mcap_record --recover IN
+OUT`` rewrites such a file whole for indexed readers (``ros2 bag``, rosbags).
 """
 from __future__ import annotations
 
@@ -120,7 +122,9 @@ class Player:
             def bag_ns_at(now: float) -> int:
                 return begin + int((now - wall_start) * rate * 1e9)
 
-            for item in self.reader.messages(topics=topics, start_ns=begin, end_ns=end):
+            # from the bag's very start unless asked otherwise: a damaged summary's start time is no filter
+            first = begin if self.options.start_offset_s > 0 else None
+            for item in self.reader.messages(topics=topics, start_ns=first, end_ns=end):
                 if self._stop.is_set():
                     break
                 target = wall_start + (item.log_time_ns - begin) / 1e9 / rate
@@ -182,9 +186,9 @@ def main(args: list[str] | None = None) -> int:
     except (BagError, argparse.ArgumentTypeError) as exc:
         print(f"mcap_play: {exc}", file=sys.stderr)
         return 2
-    if reader.truncated:
-        print(f"mcap_play: warning: {ns.bag} is truncated ({reader.error}); playing its "
-              f"{reader.message_count} readable messages", file=sys.stderr)
+    if reader.problem:
+        print(f"mcap_play: warning: {reader.problem}", file=sys.stderr)
+    known = reader.error
     options = PlayOptions(rate=ns.rate, loop=ns.loop, start_offset_s=ns.start, duration_s=ns.duration,
                           topics=ns.topics, exclude=ns.exclude, remap=remap, clock_hz=ns.clock,
                           wait_for_subscribers_s=ns.wait_for_subscribers, delay_s=ns.delay)
@@ -213,6 +217,8 @@ def main(args: list[str] | None = None) -> int:
     p50 = errors[len(errors) // 2] / 1e6 if errors else 0.0
     print(f"mcap_play: published {player.report.published} messages in {player.report.loops} pass(es); "
           f"timing error p50 {p50:.2f} ms")
+    if reader.error != known:  # damaged chunks are found while reading
+        print(f"mcap_play: warning: {reader.problem}", file=sys.stderr)
     return 0
 
 

@@ -6,9 +6,16 @@
 Topics appear while it runs are picked up (discovery every ``--discovery-interval`` s). The
 subscription QoS adapts to the publishers, as ``ros2 bag record`` does: reliable only if every
 publisher is reliable, transient-local only if every one is. Log time is the receive time on the
-node's clock (``use_sim_time`` honoured), publish time the publisher's source timestamp. Ctrl-C or
-SIGTERM finish the file properly; after a hard kill, the file holds everything up to the last
-chunk flushed (every ``--flush-interval`` s) and ``mcap_record --recover IN OUT`` repairs it.
+node's clock (``use_sim_time`` honoured), publish time the publisher's source timestamp. With
+``use_sim_time``, discovery and flushing run on the steady clock, so topics are subscribed at once
+rather than after the first ``/clock``; messages that arrive before it are held (up to
+``--max-pending``) and written with the first ``/clock`` time. ``--max-bag-size`` and
+``--max-bag-duration`` split a directory recording into ``<name>_0.mcap, <name>_1.mcap, ...`` as
+``ros2 bag record`` does, with ``metadata.yaml`` listing them. Ctrl-C or SIGTERM finish the file
+properly; after a hard kill, the file holds everything up to the last chunk flushed (every
+``--flush-interval`` s) but has no index: indexed readers (``ros2 bag``, rosbags, Foxglove) refuse
+it until ``mcap_record --recover IN OUT`` rewrites it (``mcap_play`` and our tools read it as is,
+with a warning).
 """
 from __future__ import annotations
 
@@ -22,12 +29,14 @@ import time
 from .cli import split_ros_args
 from .bag import BagError, BagWriter, get_message_class, qos_to_dict, recover
 
+MAX_PENDING = 10_000  # messages held while a use_sim_time recorder waits for its first /clock
+
 
 class Recorder:
     """Raw subscriptions on ``node`` for the selected topics, written to ``writer``."""
 
     def __init__(self, node, writer: BagWriter, topics: list[str] | None = None,
-                 exclude: str | None = None, include_hidden: bool = False):
+                 exclude: str | None = None, include_hidden: bool = False, max_pending: int = MAX_PENDING):
         self.node = node
         self.writer = writer
         self.topics = {self._absolute(t) for t in topics} if topics else None
@@ -37,6 +46,11 @@ class Recorder:
         self.unknown_types: set[str] = set()
         self.errors = 0
         self._lock = threading.Lock()
+        # use_sim_time: the node's clock reads 0 until the first /clock; hold messages until then
+        self.sim_time = bool(node.get_parameter("use_sim_time").value) if node.has_parameter("use_sim_time") else False
+        self.max_pending = max_pending
+        self.pending: list[tuple[str, str, bytes, int | None]] = []
+        self.dropped = 0
 
     def _absolute(self, topic: str) -> str:
         from rclpy.validate_full_topic_name import validate_full_topic_name  # noqa: PLC0415
@@ -91,13 +105,57 @@ class Recorder:
         def on_message(data: bytes, info) -> None:
             receive_ns = clock.now().nanoseconds
             source_ns = info.get("source_timestamp") if isinstance(info, dict) else None
-            try:
-                self.writer.write_serialized(topic, type_name, data, receive_ns, source_ns or receive_ns)
-            except Exception as exc:  # a full disk must not kill the node: count and say so
-                with self._lock:
-                    self.errors += 1
-                self.node.get_logger().error(f"write failed on {topic}: {exc}", throttle_duration_sec=5.0)
+            if receive_ns == 0 and self.sim_time:
+                self._hold(topic, type_name, data, source_ns)
+                return
+            if self.pending:
+                self.release_pending(receive_ns)
+            self._write(topic, type_name, data, receive_ns, source_ns or receive_ns)
         return on_message
+
+    def _write(self, topic: str, type_name: str, data: bytes, log_ns: int, publish_ns: int) -> None:
+        try:
+            self.writer.write_serialized(topic, type_name, data, log_ns, publish_ns)
+        except Exception as exc:  # a full disk must not kill the node: count and say so
+            with self._lock:
+                self.errors += 1
+            self.node.get_logger().error(f"write failed on {topic}: {exc}", throttle_duration_sec=5.0)
+
+    def _hold(self, topic: str, type_name: str, data: bytes, source_ns: int | None) -> None:
+        with self._lock:
+            if len(self.pending) >= self.max_pending:
+                self.pending.pop(0)
+                self.dropped += 1
+            self.pending.append((topic, type_name, bytes(data), source_ns))
+        if len(self.pending) == 1:
+            self.node.get_logger().info("use_sim_time: holding messages until the first /clock")
+
+    def release_pending(self, log_ns: int | None = None) -> None:
+        """Write the messages held before the first /clock, stamped with ``log_ns`` (default: the
+        clock now, if it runs). Called by the first message after /clock, a timer, and at the end."""
+        if log_ns is None:
+            log_ns = self.node.get_clock().now().nanoseconds
+            if log_ns == 0 and self.sim_time:
+                return
+        with self._lock:
+            held, self.pending = self.pending, []
+        for topic, type_name, data, source_ns in held:
+            self._write(topic, type_name, data, log_ns, source_ns or log_ns)
+        if self.dropped:
+            self.node.get_logger().warning(f"use_sim_time: no /clock for a while, {self.dropped} early messages "
+                                           f"beyond --max-pending were dropped")
+
+    def start(self, discovery_interval: float = 0.5, flush_interval: float = 1.0) -> None:
+        """Discover now and every ``discovery_interval`` s, flush every ``flush_interval`` s: on the
+        steady clock, so that a ``use_sim_time`` recorder does not wait for /clock to subscribe."""
+        from rclpy.clock import Clock, ClockType  # noqa: PLC0415
+
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.timers = [self.node.create_timer(discovery_interval, self.discover, clock=steady),
+                       self.node.create_timer(max(flush_interval, 0.1), self.writer.flush, clock=steady)]
+        if self.sim_time:
+            self.timers.append(self.node.create_timer(0.1, self.release_pending, clock=steady))
+        self.discover()
 
 
 def default_output_name() -> str:
@@ -120,6 +178,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help="close a chunk at least this often (seconds): what a hard kill can lose")
     parser.add_argument("--discovery-interval", type=float, default=0.5, help="seconds between topic discoveries")
     parser.add_argument("--max-duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C)")
+    parser.add_argument("-b", "--max-bag-size", type=int, default=0, metavar="BYTES",
+                        help="directory output: start a new .mcap file when the open one reaches this size (0: never)")
+    parser.add_argument("-d", "--max-bag-duration", type=float, default=0.0, metavar="S",
+                        help="directory output: start a new .mcap file every S seconds of recording (0: never)")
+    parser.add_argument("--max-pending", type=int, default=MAX_PENDING,
+                        help="use_sim_time: messages held until the first /clock (older ones are dropped, counted)")
     parser.add_argument("--recover", nargs=2, metavar=("IN", "OUT"),
                         help="repair a recording that was killed: rewrite IN's readable messages into OUT and exit")
     return parser
@@ -143,17 +207,17 @@ def main(args: list[str] | None = None) -> int:
 
     output = options.output or default_output_name()
     try:
-        writer = BagWriter(output, compression=options.compression, chunk_size=options.chunk_size)
+        writer = BagWriter(output, compression=options.compression, chunk_size=options.chunk_size,
+                           max_bytes=options.max_bag_size, max_duration_ns=int(options.max_bag_duration * 1e9))
     except BagError as exc:
         print(f"mcap_record: {exc}", file=sys.stderr)
         return 2
     rclpy.init(args=["mcap_record", *ros_args])
     node = rclpy.create_node("mcap_record")
-    recorder = Recorder(node, writer, options.topics or None, options.exclude, options.include_hidden_topics)
-    node.create_timer(options.discovery_interval, recorder.discover)
-    # close a chunk at least every flush interval: what a hard kill can lose
-    node.create_timer(max(options.flush_interval, 0.1), writer.flush)
-    recorder.discover()
+    recorder = Recorder(node, writer, options.topics or None, options.exclude, options.include_hidden_topics,
+                        max_pending=options.max_pending)
+    # discovery at once and then periodically; a chunk closed every flush interval (what a hard kill loses)
+    recorder.start(options.discovery_interval, options.flush_interval)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     started = time.monotonic()
@@ -166,12 +230,15 @@ def main(args: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        # held messages, if any: the clock's time now (0 if /clock never came, as the node saw it)
+        recorder.release_pending(node.get_clock().now().nanoseconds)
         writer.close()
         node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+    files = f" in {len(writer.files)} files" if len(writer.files) > 1 else ""
     print(f"mcap_record: wrote {writer.message_count} messages, {writer.bytes_written / 1e6:.2f} MB of payload, "
-          f"to {output}")
+          f"to {output}{files}")
     for topic, count in sorted(writer.topic_counts.items()):
         print(f"  {topic}: {count}")
     return 1 if recorder.errors else 0

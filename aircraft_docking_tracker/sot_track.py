@@ -19,7 +19,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import cv2
 import numpy as np
@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from .config import (ConfigError, add_config_arguments, config_from_arguments, load_yaml_parameters,
                      package_config_dir)
+from .bag import check_outputs
 from .docking import DockingConfig, DockingTracker
 
 NODE_NAME = "docking_tracker"
@@ -47,6 +48,8 @@ class Sequence:
     count: int | None
     gt: np.ndarray | None = None
     name: str = ""
+    files: list[Path] = field(default_factory=list)  # what is read: no output may overwrite these
+    problem: Callable[[], str | None] = lambda: None  # a truncated or damaged bag, in words
 
 
 @dataclass
@@ -59,6 +62,7 @@ class TrackRun:
     particles: np.ndarray
     step_seconds: np.ndarray
     extra: dict = field(default_factory=dict)
+    stopped: str | None = None  # why the run ended before the sequence did (a frame that does not read)
 
     @property
     def boxes(self) -> np.ndarray:
@@ -82,7 +86,8 @@ def open_sequence(path: str | Path) -> Sequence:
         if (path / "groundtruth_rect.txt").is_file():
             gt = read_sot_boxes(path / "groundtruth_rect.txt")[0]
         frames = (_read_grey(f) for f in files)
-        return Sequence(frames, len(files), gt, path.name)
+        return Sequence(frames, len(files), gt, path.name,
+                        files=[path, *files, path / "groundtruth_rect.txt"])
     raise SequenceError(f"{path}: not a frame folder, a video ({', '.join(VIDEO_SUFFIXES)}) or an .mcap bag")
 
 
@@ -108,11 +113,11 @@ def _video_sequence(path: Path) -> Sequence:
                 yield cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
         finally:
             capture.release()
-    return Sequence(frames(), count, None, path.stem)
+    return Sequence(frames(), count, None, path.stem, files=[path])
 
 
 def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "ground_truth/polygon") -> Sequence:
-    from .bag import BagReader, stamp_to_ns  # noqa: PLC0415
+    from .bag import BagError, BagReader, stamp_to_ns  # noqa: PLC0415
     from .images import to_mono8  # noqa: PLC0415
     from .scenarios.messages import polygon_to_quad  # noqa: PLC0415
 
@@ -120,11 +125,20 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
     topics = {name.lstrip("/"): name for name in reader.topics}
     if image_topic not in topics:
         raise SequenceError(f"{path}: no '{image_topic}' topic (has {sorted(topics)})")
+    def decoded(topic: str) -> Iterator:
+        """Messages of ``topic``, None for one that does not deserialise (the run stops there)."""
+        for item in reader.messages([topic]):
+            try:
+                yield item.deserialize()
+            except BagError:
+                yield None
+
     gt_by_stamp = {}
     if gt_topic in topics:
-        for _, msg, _ in reader.ros_messages([topics[gt_topic]]):
-            gt_by_stamp[stamp_to_ns(msg.header.stamp)] = polygon_to_quad(msg)
-    stamps = [stamp_to_ns(msg.header.stamp) for _, msg, _ in reader.ros_messages([topics[image_topic]])] \
+        for msg in decoded(topics[gt_topic]):
+            if msg is not None:
+                gt_by_stamp[stamp_to_ns(msg.header.stamp)] = polygon_to_quad(msg)
+    stamps = [stamp_to_ns(msg.header.stamp) if msg is not None else None for msg in decoded(topics[image_topic])] \
         if gt_by_stamp else None
     gt = np.stack([gt_by_stamp.get(s, np.full((4, 2), np.nan)) for s in stamps]) if gt_by_stamp else None
     count = reader.topics[topics[image_topic]].count
@@ -132,7 +146,8 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
     def frames() -> Iterator[np.ndarray]:
         for _, msg, _ in reader.ros_messages([topics[image_topic]]):
             yield to_mono8(msg)
-    return Sequence(frames(), count, gt, path.stem)
+    return Sequence(frames(), count, gt, path.stem, files=[*reader.files, reader.bag_path],
+                    problem=lambda: reader.problem)
 
 
 # --------------------------------------------------------------------------- the run
@@ -141,11 +156,25 @@ def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int 
     """Run the docking tracker over grey ``frames`` from ``init`` (box, quadrilateral or state).
 
     The first frame starts the filter; each later frame is one ``DockingTracker.step`` (timed
-    alone: reading and decoding the frames are not in ``step_seconds``).
+    alone: reading and decoding the frames are not in ``step_seconds``). A frame that cannot be
+    read or decoded (a ``ValueError`` from ``frames``) ends the run: what came before it is kept
+    and ``TrackRun.stopped`` says which frame and why.
     """
     tracker = DockingTracker(config)
     quads, states, scores, particles, seconds = [], [], [], [], []
-    for index, frame in enumerate(tqdm(frames, total=count, desc=desc, disable=not progress, unit="frame")):
+    stopped = None
+    iterator = iter(frames)
+    bar = tqdm(total=count, desc=desc, disable=not progress, unit="frame")
+    index = 0
+    while True:
+        try:
+            frame = next(iterator)
+        except StopIteration:
+            break
+        except ValueError as exc:
+            stopped = f"frame {index} cannot be read: {exc}"
+            break
+        bar.update(1)
         t0 = time.perf_counter()
         result = tracker.start(frame, init) if index == 0 else tracker.step(frame)
         seconds.append(time.perf_counter() - t0)
@@ -153,9 +182,12 @@ def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int 
         states.append(result.state)
         scores.append(result.score)
         particles.append(result.particles)
+        index += 1
+    bar.close()
     if not quads:
-        raise SequenceError("the sequence has no frames")
-    return TrackRun(np.array(quads), np.array(states), np.array(scores), np.array(particles), np.array(seconds))
+        raise SequenceError(stopped or "the sequence has no frames")
+    return TrackRun(np.array(quads), np.array(states), np.array(scores), np.array(particles), np.array(seconds),
+                    stopped=stopped)
 
 
 def score_run(run: TrackRun, gt: np.ndarray) -> dict:
@@ -194,6 +226,9 @@ def main(argv=None) -> int:
         base = load_yaml_parameters(args.params_file, NODE_NAME) if args.params_file.is_file() else {}
         config = config_from_arguments(DockingConfig, args, base=base)
         seq = open_sequence(args.input)
+        check_outputs([args.out, args.quads], seq.files, "sot_track")
+        if seq.problem():
+            print(f"sot_track: warning: {seq.problem()}", file=sys.stderr)
         if args.init:
             init = np.array([float(v) for v in args.init.split(",")])
             if init.shape != (4,):
@@ -212,6 +247,9 @@ def main(argv=None) -> int:
         return 2
     write_results(run, args.out, args.quads)
     n = len(run.quads)
+    if run.stopped:
+        print(f"sot_track: error: stopped early, {run.stopped}; the {n} frames before it are "
+              f"{'written' if args.out or args.quads else 'scored'}", file=sys.stderr)
     fps = (n - 1) / max(run.step_seconds[1:].sum(), 1e-9) if n > 1 else float("nan")
     line = (f"{seq.name}: {n} frames, {config.method}, {fps:.1f} frames/s (tracker only), "
             f"particles/frame mean {run.particles[1:].mean() if n > 1 else 0:.0f}, "
@@ -220,7 +258,7 @@ def main(argv=None) -> int:
         scores = score_run(run, seq.gt[:n])
         line += f", success AUC {scores['success_auc']:.3f}, precision@20 {scores['precision']:.3f}"
     print(line)
-    return 0
+    return 1 if run.stopped else 0
 
 
 if __name__ == "__main__":

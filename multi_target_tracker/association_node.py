@@ -6,7 +6,8 @@ Topics (relative names):
 * in ``image`` (``sensor_msgs/Image``), only with ``output.annotate_image``;
 * out ``tracks`` (``PointCloud2``, ``TRACK_DTYPE`` rows: confirmed tracks, coasting ones with
   ``output.include_coasting``, tentative ones with ``output.include_tentative``; velocities in px/s);
-* out ``tracks/markers`` (``visualization_msgs/MarkerArray``: boxes, ids, short trails);
+* out ``tracks/image_markers`` (``visualization_msgs/ImageMarker``: boxes and trails coloured by id, one overlay);
+* out ``tracks/markers`` (legacy ``visualization_msgs/MarkerArray`` in pixels: boxes, ids, short trails);
 * out ``tracks/image`` (``sensor_msgs/Image`` bgr8, the image with the tracks drawn), only with
   ``output.annotate_image``.
 
@@ -24,7 +25,7 @@ import numpy as np
 
 from aircraft_docking_tracker.bag import stamp_to_ns
 from aircraft_docking_tracker.config import param
-from aircraft_docking_tracker.markers import boxes_to_markers
+from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
 from aircraft_docking_tracker.processing import MessageProcessor, ProcessorSpec
@@ -88,7 +89,8 @@ class AssociationProcessor(MessageProcessor):
         self.resets = 0
         self.inputs = {"detections": "sensor_msgs/msg/PointCloud2"}
         self.outputs = {"tracks": "sensor_msgs/msg/PointCloud2",
-                        "tracks/markers": "visualization_msgs/msg/MarkerArray"}
+                        "tracks/markers": "visualization_msgs/msg/MarkerArray",
+                        "tracks/image_markers": "visualization_msgs/msg/ImageMarker"}
         self.latest_only = frozenset()
         if self.output.annotate_image:
             self.inputs["image"] = "sensor_msgs/msg/Image"
@@ -112,9 +114,11 @@ class AssociationProcessor(MessageProcessor):
         shown = result.tracks.visible(self.output.include_tentative, self.output.include_coasting)
         self._shown = len(shown)
         table = tracks_to_table(shown)
+        trails = self._trails(shown.ids)
         out = [("tracks", table_to_cloud(table, msg.header)),
-               ("tracks/markers", boxes_to_markers(table, msg.header, "tracks", label_field="id",
-                                                   trails=self._trails(shown.ids)))]
+               ("tracks/markers", boxes_to_markers(table, msg.header, "tracks", label_field="id", trails=trails)),
+               ("tracks/image_markers", boxes_to_image_marker(table, msg.header, "tracks", label_field="id",
+                                                              trails=trails))]
         if self.output.annotate_image:
             out += self._annotate(stamp, table)
         return out

@@ -22,6 +22,8 @@ from typing import Iterator
 import cv2
 import numpy as np
 
+from aircraft_docking_tracker.bag import check_outputs
+from aircraft_docking_tracker.cli import AtomicFile
 from aircraft_docking_tracker.config import (ConfigError, add_config_arguments, config_from_arguments,
                                              load_yaml_parameters, package_config_dir)
 from multi_target_tracker.detector import Detector, DetectorConfig
@@ -62,9 +64,22 @@ def frames(source: str | Path) -> Iterator[tuple[str, np.ndarray, int]]:
         from aircraft_docking_tracker.bag import BagReader, stamp_to_ns  # noqa: PLC0415
         from aircraft_docking_tracker.images import to_bgr8  # noqa: PLC0415
 
-        for _, msg, _ in BagReader(source).ros_messages(["image"]):
+        reader = BagReader(source)
+        if reader.problem:
+            print(f"detect: warning: {reader.problem}", file=sys.stderr)
+        known = reader.error
+        topic = next((t for t in reader.topics if t.lstrip("/") == "image"), "image")
+        for item in reader.messages([topic]):
+            try:  # a frame that does not decode is skipped, as an unreadable file in a folder
+                msg = item.deserialize()
+                image = to_bgr8(msg)
+            except ValueError as exc:
+                print(f"detect: frame at {item.log_time_ns} ns: {exc}; skipped", file=sys.stderr)
+                continue
             stamp = stamp_to_ns(msg.header.stamp)
-            yield str(stamp), to_bgr8(msg), stamp
+            yield str(stamp), image, stamp
+        if reader.error != known:
+            print(f"detect: warning: {reader.problem}", file=sys.stderr)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -84,17 +99,24 @@ def run(args) -> dict:
     base = load_yaml_parameters(path, NODE_NAME) if path.is_file() else {}
     config = config_from_arguments(DetectorConfig, args, base={k: v for k, v in base.items() if "." not in k})
     detector = Detector(config)
-    out = sys.stdout if args.output == "-" else open(args.output, "w")
+    source = Path(args.input)
+    is_bag = not (source.is_dir() and not (source / "metadata.yaml").is_file()) and \
+        source.suffix.lower() not in VIDEO_SUFFIXES + IMAGE_SUFFIXES
+    inputs = [source]
+    if source.is_dir():
+        inputs += [p for p in source.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES + (".mcap", ".yaml")]
+    check_outputs([args.output, args.bag], inputs, "detect")
+    # both outputs appear only when the run completes: an error leaves no partial file behind
+    out = sys.stdout if args.output == "-" else AtomicFile(args.output)
     writer = None
     if args.bag:
         from aircraft_docking_tracker.bag import BagWriter  # noqa: PLC0415
-        writer = BagWriter(args.bag, overwrite=True)
-    is_bag = not (Path(args.input).is_dir() and not (Path(args.input) / "metadata.yaml").is_file()) and \
-        Path(args.input).suffix.lower() not in VIDEO_SUFFIXES + IMAGE_SUFFIXES
+        writer = BagWriter(args.bag, overwrite=True, atomic=True)
     from tqdm import tqdm  # noqa: PLC0415
 
     n_frames = n_dets = 0
     seconds = 0.0
+    completed = False
     try:
         for name, image, stamp in tqdm(frames(args.input), unit="frame", disable=args.no_progress or out is sys.stdout):
             started = time.perf_counter()
@@ -109,11 +131,12 @@ def run(args) -> dict:
                 _write_frame(writer, image, table, stamp, args.frame_id, write_image=not is_bag)
         if writer is not None and is_bag:
             _copy_bag(args.input, writer)
+        completed = True
     finally:
         if out is not sys.stdout:
-            out.close()
+            out.close() if completed else out.abort()
         if writer is not None:
-            writer.close()
+            writer.close() if completed else writer.abort()
     return {"frames": n_frames, "detections": n_dets, "fps": n_frames / seconds if seconds else 0.0}
 
 
@@ -134,7 +157,11 @@ def _copy_bag(source: str, writer) -> None:
     """Every message of the input bag except its old detections (ours replace them)."""
     from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415
 
-    for item in BagReader(source).messages():
+    reader = BagReader(source)
+    for info in reader.topics.values():  # recorded schemas: types not installed here are copied too
+        if info.name.lstrip("/") != "detections" and info.name not in writer.topic_counts:
+            writer.add_topic_like(info)
+    for item in reader.messages():
         if item.topic.lstrip("/") != "detections":
             writer.write_serialized(item.topic, item.type_name, item.data, item.log_time_ns, item.publish_time_ns)
 

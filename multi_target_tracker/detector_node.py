@@ -6,7 +6,8 @@ Topics (relative names):
   ``node.compressed``), sensor-data QoS, newest frame kept, skipped frames counted;
 * out ``detections`` (``sensor_msgs/PointCloud2``, ``DETECTION_DTYPE`` rows: x, y, w, h [px,
   top-left corner], score [last-stage margin, or OpenCV's level weight], class_id);
-* out ``detections/markers`` (``visualization_msgs/MarkerArray``, one box per detection);
+* out ``detections/image_markers`` (``visualization_msgs/ImageMarker``: every box, one LINE_LIST overlay);
+* out ``detections/markers`` (legacy ``visualization_msgs/MarkerArray`` in pixels, one box per detection);
 * out ``detections/image`` (``sensor_msgs/Image`` bgr8 with the boxes drawn), only with
   ``node.annotate_image``;
 * ``/diagnostics``: rate, latency, skipped and rejected frames, detections per frame.
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aircraft_docking_tracker.config import param
-from aircraft_docking_tracker.markers import boxes_to_markers
+from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import table_to_cloud
 from aircraft_docking_tracker.processing import MessageProcessor, ProcessorSpec, Rejected
@@ -64,7 +65,8 @@ class DetectorProcessor(MessageProcessor):
         image_type = "sensor_msgs/msg/CompressedImage" if self.node.compressed else "sensor_msgs/msg/Image"
         self.inputs = {"image": image_type}
         self.outputs = {"detections": "sensor_msgs/msg/PointCloud2",
-                        "detections/markers": "visualization_msgs/msg/MarkerArray"}
+                        "detections/markers": "visualization_msgs/msg/MarkerArray",
+                        "detections/image_markers": "visualization_msgs/msg/ImageMarker"}
         if self.node.annotate_image:
             self.outputs["detections/image"] = "sensor_msgs/msg/Image"
         self.latest_only = frozenset({"image"})
@@ -94,7 +96,8 @@ class DetectorProcessor(MessageProcessor):
         table = self.detector.detect(gray)
         self.last_count = len(table)
         out = [("detections", table_to_cloud(table, msg.header)),
-               ("detections/markers", boxes_to_markers(table, msg.header, "detections"))]
+               ("detections/markers", boxes_to_markers(table, msg.header, "detections")),
+               ("detections/image_markers", boxes_to_image_marker(table, msg.header, "detections"))]
         if bgr is not None:
             out.append(("detections/image", numpy_to_image(draw_detections(bgr, table), "bgr8", msg.header)))
         return out

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from aircraft_docking_tracker.bag import BagError, check_outputs
 from aircraft_docking_tracker.config import (add_config_arguments, config_from_arguments, load_yaml_parameters,
                                              package_config_dir)
 from multi_target_tracker import motchallenge as mc
@@ -93,6 +94,11 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     if not args.det.is_file():
         print(f"mot_track: {args.det} not found", file=sys.stderr)
+        return 2
+    try:  # `-o det.txt` would replace the detections by the results
+        check_outputs([args.output], [p for p in (args.det, args.gt, args.seqinfo, args.params) if p])
+    except BagError as exc:
+        print(f"mot_track: {exc}", file=sys.stderr)
         return 2
     info = mc.read_seqinfo(args.seqinfo or args.det.parent)
     fps = args.fps or info.get("frameRate") or 30.0

@@ -403,6 +403,10 @@ def load_training_data(args) -> list[LabelledImage]:
 
 
 def run(args) -> Cascade:
+    from aircraft_docking_tracker.bag import check_outputs  # noqa: PLC0415
+
+    # the model is saved after every stage: `-o` must not be one of the bags or folders trained from
+    check_outputs([args.output], [*args.yolo, *args.voc, *args.bag, *args.negative_images], "train_cascade")
     cfg = config_from_arguments(CascadeTrainConfig, args)
     rng = np.random.default_rng(args.seed)
     data = load_training_data(args)

@@ -63,9 +63,9 @@ def test_processor_detects_strides_and_rejects(model, scenes):
     for k, (image, _) in enumerate(scenes):
         bgr = np.dstack([image] * 3)
         outputs.append(process_guarded(proc, "image", numpy_to_image(bgr, "bgr8", header(k)), stats))
-    assert [len(o) for o in outputs] == [3, 0, 3]           # every 2nd frame passed over
+    assert [len(o) for o in outputs] == [4, 0, 4]           # every 2nd frame passed over
     topics = [t for t, _ in outputs[0]]
-    assert topics == ["detections", "detections/markers", "detections/image"]
+    assert topics == ["detections", "detections/markers", "detections/image_markers", "detections/image"]
     table = cloud_to_table(outputs[2][0][1], DETECTION_DTYPE)
     assert hits(table, scenes[2][1]) >= 2 and (table["class_id"] == 7).all()
     assert outputs[2][0][1].header.frame_id == "uav_cam" and outputs[2][0][1].header.stamp == header(2).stamp

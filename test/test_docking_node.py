@@ -54,7 +54,8 @@ def test_processor_waits_starts_from_detections_stops_and_rejects():
     proc = DockingProcessor(DockingConfig(detection_class=4), DockingNodeConfig(annotate_image=True))
     stats = ProcessingStats()
     out = process_guarded(proc, "image", image_msg(scene[0][0], 0), stats)
-    assert [t for t, _ in out] == ["docking/polygon", "docking/state", "docking/markers", "docking/image"]
+    assert [t for t, _ in out] == ["docking/polygon", "docking/state", "docking/markers", "docking/image_markers",
+                                   "docking/image"]
     assert len(out[0][1].polygon.points) == 0                                    # waiting: empty polygon
     assert cloud_to_table(out[1][1], STATE_DTYPE)["state"][0] == WAITING
     det = np.array([(*ag.to_box(scene[1][1]), 0.9, 4)], DETECTION_DTYPE)

@@ -97,5 +97,5 @@ def test_partial_rejections_are_counted_offline_as_live():
     table = np.array([(10, 10, 5, 5, 0.9, 0), (np.nan, 1, 1, 1, 0.9, 0)], DETECTION_DTYPE)
     msg = table_to_cloud(table)
     msg.header.stamp = ns_to_stamp(1_000_000_000)
-    assert [t for t, _ in runner.feed("detections", msg)] == ["tracks", "tracks/markers"]
+    assert [t for t, _ in runner.feed("detections", msg)] == ["tracks", "tracks/markers", "tracks/image_markers"]
     assert runner.stats["association"].rejected_total == 1

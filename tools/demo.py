@@ -128,13 +128,39 @@ def diagnostics_summary(recording: Path) -> dict:
     return last
 
 
+# (the nodes' stamp latency is left out: replayed bags carry their recording's stamps)
+DIAGNOSTIC_COLUMNS = [("received", "received"), ("processed", "processed"), ("skipped", "skipped"),
+                      ("rejected", "rejected"), ("processing_ms_p50", "proc. p50 ms"),
+                      ("processing_ms_p95", "proc. p95 ms"), ("processing_ms_max", "proc. max ms")]
+ROLES = {"stand": "docking stand camera: detector -> docking tracker",
+         "uav": "UAV camera: detector -> association"}
+
+
+def summary_markdown(results: dict, recording: Path) -> str:
+    """summary.md: per camera, a table per metric family; then each node's last /diagnostics."""
+    from aircraft_docking_tracker.evaluation.report import format_markdown, markdown_table
+
+    lines = ["# Demo report", "", f"Recording: `{recording}`. Plots and annotated strips: one folder per camera.", ""]
+    for namespace in CAMERAS:
+        lines += [f"## /{namespace} ({ROLES.get(namespace, '')})", "", format_markdown({namespace: results[namespace]}), ""]
+    diagnostics = results.get("diagnostics") or {}
+    lines += ["## Nodes (their last /diagnostics)", ""]
+    if diagnostics:
+        body = [[node] + [values.get(key, "-") for key, _ in DIAGNOSTIC_COLUMNS]
+                for node, values in sorted(diagnostics.items())]
+        lines.append(markdown_table(["node"] + [title for _, title in DIAGNOSTIC_COLUMNS], body))
+    else:
+        lines.append("(no /diagnostics in the recording)")
+    return "\n".join(lines) + "\n"
+
+
 def report(recording: Path, bags: dict[str, Path], out: Path) -> dict:
     from aircraft_docking_tracker.evaluation.evaluate import EvaluateConfig, evaluate_bags, write_plots, write_strip
-    from aircraft_docking_tracker.evaluation.report import format_report, write_json
+    from aircraft_docking_tracker.evaluation.report import write_json
 
     folder = out / "report"
     folder.mkdir(parents=True, exist_ok=True)
-    results, lines = {}, []
+    results = {}
     for namespace in CAMERAS:
         scores = evaluate_bags(recording, config=EvaluateConfig(namespace=namespace))
         results[namespace] = scores
@@ -142,10 +168,9 @@ def report(recording: Path, bags: dict[str, Path], out: Path) -> dict:
         sub.mkdir(exist_ok=True)
         write_plots({namespace: scores}, sub)
         write_strip(recording, None, sub / "strip.png", namespace=namespace)
-        lines += [f"## /{namespace}", "", format_report(scores), ""]
     results["diagnostics"] = diagnostics_summary(recording)
     write_json(folder / "summary.json", results)
-    (folder / "summary.md").write_text("\n".join(lines))
+    (folder / "summary.md").write_text(summary_markdown(results, recording))
     return results
 
 
@@ -153,7 +178,7 @@ def print_summary(results: dict, out: Path) -> None:
     stand, uav = results["stand"], results["uav"]
     sot, mot, det = stand.get("sot", {}), uav.get("mot", {}), uav.get("detection", {})
     print("\n=== demo summary ===")
-    print(f"stand camera (/stand, docking tracker): {sot.get('frames', '?')} frames, "
+    print(f"stand camera (/stand, docking tracker): {sot.get('scored_frames', '?')} frames, "
           f"success AUC {sot.get('success_auc', float('nan')):.3f}, precision@20px {sot.get('precision', float('nan')):.3f}")
     print(f"UAV camera (/uav, detector + association): MOTA {mot.get('mota', float('nan')):.3f}, "
           f"IDF1 {mot.get('idf1', float('nan')):.3f}, ID switches {mot.get('num_switches', '?')}, "

@@ -121,9 +121,11 @@ def resolve_topics(available, wanted, namespace: str = "") -> dict:
     return out
 
 
-def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(IMAGE,), namespace: str = "") -> dict:
+def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(IMAGE,), namespace: str = "",
+                 problems: list | None = None) -> dict:
     """``topic -> Stream`` for the ``topics`` (agreed relative names) present in the bag; values are
-    decoded messages (None for ``stamps_only`` topics, whose log times are all that is needed: images)."""
+    decoded messages (None for ``stamps_only`` topics, whose log times are all that is needed: images).
+    ``problems``: gets what is wrong with the bag (truncated, damaged chunks), if anything."""
     reader = BagReader(path)
     names = resolve_topics(reader.topics, topics, namespace)
     streams = {name: Stream({}, {}) for name in names.values()}
@@ -138,6 +140,8 @@ def read_streams(path: str | Path, topics, progress: bool = False, stamps_only=(
         stamp = header_stamp_ns(item.data)
         stream.values[stamp] = None if name in stamps_only else item.deserialize()
         stream.log_ns[stamp] = item.log_time_ns
+    if problems is not None and reader.problem and reader.problem not in problems:
+        problems.append(reader.problem)
     return streams
 
 
@@ -329,17 +333,19 @@ def evaluate_bags(output_bag: str | Path, gt_bag: str | Path | None = None, conf
     raises EvaluationError when no family can be scored.
     """
     cfg = validate(config or EvaluateConfig())
+    problems: list[str] = []
     out_streams = read_streams(output_bag, (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON), progress,
-                               namespace=cfg.namespace)
+                               namespace=cfg.namespace, problems=problems)
     gt_path = gt_bag or output_bag
     gt_streams = read_streams(gt_path, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND), progress,
-                              namespace=cfg.namespace)
+                              namespace=cfg.namespace, problems=problems)
     result = evaluate_streams(out_streams, gt_streams, cfg)
     if not {"sot", "mot", "detection"} & set(result):
         raise EvaluationError(f"nothing to score: output topics {sorted(out_streams)}, ground truth topics "
                               f"{sorted(gt_streams)} in {gt_path}")
     result["inputs"] = {"output": str(output_bag), "ground_truth": str(gt_path),
-                        "truncated": [str(p) for p in {output_bag, gt_path} if BagReader(p).truncated]}
+                        "truncated": [str(p) for p in {output_bag, gt_path} if BagReader(p).truncated],
+                        "problems": problems}
     return result
 
 
@@ -508,9 +514,8 @@ def main(argv=None) -> int:
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
     for name, r in results.items():
-        for path in r["inputs"].get("truncated", []):
-            print(f"evaluate: warning: {path} is truncated (a recording killed hard?); scored up to its last "
-                  "complete record", file=sys.stderr)
+        for problem in r["inputs"].get("problems", []):  # truncated (a recording killed hard?) or damaged
+            print(f"evaluate: warning: {problem}; scored what could be read", file=sys.stderr)
     print(report.format_report(results), flush=True)
     if args.report:
         folder = Path(args.report)

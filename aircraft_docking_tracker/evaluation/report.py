@@ -1,4 +1,4 @@
-"""Evaluation reports: a printed table per metric family and a JSON file (no ROS, no plots here)."""
+"""Evaluation reports: a printed or Markdown table per metric family and a JSON file (no ROS, no plots here)."""
 from __future__ import annotations
 
 import json
@@ -53,12 +53,39 @@ def format_report(results: dict) -> str:
     """``results``: run name -> evaluate_bags() dict. One table per family present."""
     out = []
     for family in COLUMNS:
-        rows = {name: r[family] for name, r in results.items() if family in r}
-        if family == "speed":
-            rows = {f"{name}:{topic}": s for name, r in results.items() for topic, s in r.get("speed", {}).items()}
+        rows = _family_rows(results, family)
         if rows:
             out.append(format_table(family, rows))
     return "\n\n".join(out)
+
+
+def _family_rows(results: dict, family: str) -> dict:
+    """``run name -> metrics`` of one family; speed rows are per ``run:topic``."""
+    if family == "speed":
+        return {f"{name}:{topic}": s for name, r in results.items() for topic, s in r.get("speed", {}).items()
+                if isinstance(s, dict)}
+    return {name: r[family] for name, r in results.items() if isinstance(r, dict) and family in r}
+
+
+def markdown_table(headings: list[str], body: list[list[str]]) -> str:
+    """A GitHub-flavoured Markdown table (first column left-aligned, the others right)."""
+    def row(cells) -> str:
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+    return "\n".join([row(headings), "|" + "|".join([":---"] + ["---:"] * (len(headings) - 1)) + "|",
+                      *(row(r) for r in body)])
+
+
+def format_markdown(results: dict, level: int = 3) -> str:
+    """``results``: run name -> evaluate_bags() dict. A heading and a Markdown table per family
+    present; a line saying so when nothing could be scored."""
+    out = []
+    for family, columns in COLUMNS.items():
+        rows = _family_rows(results, family)
+        if not rows:
+            continue
+        body = [[name] + [_cell(r.get(key), fmt) for key, _, fmt in columns] for name, r in rows.items()]
+        out.append(f"{'#' * level} {TITLES[family]}\n\n" + markdown_table(["run"] + [c[1] for c in columns], body))
+    return "\n\n".join(out) if out else "(nothing scored: no output and ground-truth topics in common)"
 
 
 def sanitize(obj):
