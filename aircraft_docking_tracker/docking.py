@@ -54,10 +54,13 @@ class DockingConfig(FilterConfig):
                                        low=-1e9, high=1e9)
 
     def validate(self) -> None:
-        """The cross-field check ``config.validate`` calls: initial_box is empty or a real box."""
+        """The cross-field checks ``config.validate`` calls: the filter's, and initial_box is empty or
+        a real box (finite x, y, w, h with w, h > 0; ``check_field`` already refused NaN and inf)."""
+        super().validate()
         box = self.initial_box
-        if len(box) not in (0, 4) or (len(box) == 4 and not (box[2] > 0 and box[3] > 0)):
-            raise ConfigError(f"initial_box must be empty or x, y, w, h with w, h > 0, got {list(box)}")
+        if len(box) not in (0, 4) or (len(box) == 4 and not (np.isfinite(box).all() and box[2] > 0 and box[3] > 0)):
+            raise ConfigError(f"initial_box must be empty or x, y, w, h with w, h > 0, got {list(box)}",
+                              ("initial_box",))
 
 
 @dataclass
