@@ -96,7 +96,8 @@ def best_detection(table: np.ndarray | None, class_id: int = -1, min_score: floa
         return None
     boxes = np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(float)
     scores = np.asarray(table["score"], dtype=float)
-    ok = np.isfinite(boxes).all(axis=1) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0) & (scores >= min_score)
+    # finite, inside any plausible image (|v| < 1e6 px) and of positive size
+    ok = (np.abs(boxes) < 1e6).all(axis=1) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0) & (scores >= min_score)
     if class_id >= 0:
         ok &= np.asarray(table["class_id"]) == class_id
     if not ok.any():

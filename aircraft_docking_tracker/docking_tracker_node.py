@@ -40,6 +40,7 @@ from .processing import MessageProcessor, ProcessorSpec, Rejected, best_rows
 NODE_NAME = "docking_tracker"
 NODE_PREFIX = "node."
 COLORS = {TRACKING: (0.1, 1.0, 0.2), LOST: (1.0, 0.2, 0.1)}
+_DRAWABLE = 1e6  # pixel coordinates drawn at most this far out (NaN and 1e30 are not)
 
 
 @dataclass
@@ -66,11 +67,13 @@ def draw_docking(bgr: np.ndarray, result: DockingResult, max_particles: int) -> 
         cv2.putText(out, "waiting", (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 200, 255), 2)
         return out
     for cx, cy in result.particle_states[:max_particles, :2, 2]:
-        if np.isfinite(cx) and np.isfinite(cy):
+        if abs(cx) < _DRAWABLE and abs(cy) < _DRAWABLE:          # finite and within OpenCV's int range
             cv2.circle(out, (int(round(cx)), int(round(cy))), 1, (255, 255, 255), -1)
     r, g, b = COLORS[result.state]
     color = (int(255 * b), int(255 * g), int(255 * r))
-    cv2.polylines(out, [np.round(result.quad).astype(np.int32)], True, color, 2, cv2.LINE_AA)
+    quad = result.quad
+    if (np.abs(quad) < _DRAWABLE).all():
+        cv2.polylines(out, [np.round(quad).astype(np.int32)], True, color, 2, cv2.LINE_AA)
     cv2.putText(out, f"{STATE_NAMES[result.state]} S={result.score:.2f} n={result.particles}", (8, 20),
                 cv2.FONT_HERSHEY_SIMPLEX, 0.6, color, 2)
     return out
@@ -111,8 +114,8 @@ class DockingProcessor(MessageProcessor):
         if len(msg.polygon.points) > 4:
             raise Rejected(f"docking/init needs 4 points (quadrilateral) or 2 (box corners), got "
                            f"{len(msg.polygon.points)}")
-        if not np.isfinite(points).all():
-            raise Rejected("docking/init has a point that is not finite")
+        if not (np.abs(points) < _DRAWABLE).all():
+            raise Rejected(f"docking/init has a point that is not finite or beyond +-{_DRAWABLE:g} px")
         if len(points) == 0:
             self.tracker.stop()                    # an empty polygon: stop, wait for a new start
             return

@@ -170,8 +170,8 @@ def _scale_to_8bit(array: np.ndarray) -> np.ndarray:
     if array.dtype == np.uint16:
         return (array >> 8).astype(np.uint8)
     if array.dtype.kind == "f":
-        finite = np.nan_to_num(array, nan=0.0, posinf=1.0, neginf=0.0)
-        return np.clip(finite * 255.0, 0, 255).astype(np.uint8)
+        finite = np.clip(np.nan_to_num(array, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+        return (finite * 255.0).astype(np.uint8)
     return cv2.normalize(array.astype(np.float32), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
 
 
