@@ -239,6 +239,7 @@ class PerceptionNode(Node):
         """Subscribe to the processor's inputs and publish its outputs (see module docstring)."""
         self.processor = processor
         processor.on_rejected = self.reject
+        processor.on_event = self.time_jumped
         for topic, type_name in processor.outputs.items():
             self._publishers_by_topic[topic] = self.create_publisher(get_message_class(type_name), topic, OUTPUT_QOS)
         for topic, type_name in processor.inputs.items():
@@ -298,7 +299,8 @@ class PerceptionNode(Node):
         self.get_logger().warning(f"rejected input: {reason}" + (f" ({count} so far)" if count > 1 else ""))
 
     def time_jumped(self, note: str) -> None:
-        self.get_logger().warning(note)
+        """Log a reset of the processor's state (stamp jumps back, or the core's own reset)."""
+        self.get_logger().warning(note, throttle_duration_sec=1.0)
 
     def processed(self, input_stamp_ns: int | None, processing_s: float = 0.0) -> None:
         """Feed rate / latency diagnostics (for nodes that do not use a processor)."""

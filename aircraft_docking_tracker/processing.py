@@ -40,10 +40,16 @@ class MessageProcessor:
     #: Set by whoever runs the processor (live node, offline runner) to count a partial rejection,
     #: e.g. invalid rows dropped from a message that is otherwise processed.
     on_rejected: Callable[[str], None] | None = None
+    #: Set likewise to log a notable event that is not a rejection (e.g. the tracks were reset).
+    on_event: Callable[[str], None] | None = None
 
     def report_rejection(self, reason: str) -> None:
         if self.on_rejected is not None:
             self.on_rejected(reason)
+
+    def report_event(self, text: str) -> None:
+        if self.on_event is not None:
+            self.on_event(text)
 
     def process(self, topic: str, msg: Any) -> list[tuple[str, Any]]:
         """Handle one input message; return ``(output topic, message)`` pairs to publish."""

@@ -122,7 +122,9 @@ class AssociationProcessor(MessageProcessor):
         if result.rejected:
             self.invalid_detections += result.rejected
             self.report_rejection(f"detections: {result.rejected} invalid rows (NaN, inf or size <= 0) dropped")
-        self.resets += int(result.reset)
+        if result.reset:
+            self.resets += 1
+            self.report_event("detections: stamp jumped; the tracks were reset (new ids keep counting up)")
         shown = result.tracks.visible(self.output.include_tentative, self.output.include_coasting)
         self._shown = len(shown)
         table = tracks_to_table(shown)
