@@ -151,7 +151,7 @@ class PerceptionNode(Node):
             except (InvalidParameterValueException, ParameterException, config_module.ConfigError,
                     TypeError, ValueError) as exc:
                 given = override.value if override is not None else None
-                self._refuse_at_start(full, f"{full}={given!r} refused: {_short(exc)}; using the default {default!r}")
+                self._refuse_at_start(full, f"{full}={given!r} refused: {_short(exc)}; keeping the default {default!r}")
                 if self.has_parameter(full):
                     self.undeclare_parameter(full)
                 self.declare_parameter(full, _ros_default(default), descriptor, ignore_override=True)
@@ -169,7 +169,7 @@ class PerceptionNode(Node):
                     cfg = cls(**values)
                     break
                 for n in named:
-                    self._refuse_at_start(prefix + n, f"{prefix + n}={values[n]!r} refused: {exc}; using the "
+                    self._refuse_at_start(prefix + n, f"{prefix + n}={values[n]!r} refused: {exc}; keeping the "
                                           f"default {getattr(defaults, n)!r}")
                     values[n] = getattr(defaults, n)
                     self.undeclare_parameter(prefix + n)
