@@ -173,14 +173,19 @@ def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: Pr
     * processing time and stamp-to-output latency (with ``now_ns``, the node's clock) are recorded.
     """
     stats.receive()
-    try:
-        stamp = message_stamp_ns(msg)
-    except (AttributeError, TypeError, ValueError, OverflowError) as exc:
-        reason = f"{topic}: bad header stamp ({exc})"
+
+    def refuse(reason: str, bug: bool = False) -> list:
         stats.reject(reason)
+        if bug:
+            LOG.error("%s\n%s", reason, traceback.format_exc())
         if on_error:
             on_error(reason)
         return []
+
+    try:
+        stamp = message_stamp_ns(msg)
+    except (AttributeError, TypeError, ValueError, OverflowError) as exc:
+        return refuse(f"{topic}: bad header stamp ({exc})")
     if stamp is not None:
         last = stats._last_stamp.get(topic)
         if last is not None and stamp < last:
@@ -192,29 +197,15 @@ def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: Pr
             try:
                 processor.reset()
             except Exception as exc:  # a reset must not take the node down either
-                reason = f"{topic}: internal error on reset {type(exc).__name__}: {exc}"
-                stats.reject(reason)
-                LOG.error("%s\n%s", reason, traceback.format_exc())
-                if on_error:
-                    on_error(reason)
-                return []
+                return refuse(f"{topic}: internal error on reset {type(exc).__name__}: {exc}", bug=True)
         stats._last_stamp[topic] = stamp
     started = time.perf_counter()
     try:
         outputs = processor.process(topic, msg)
     except ValueError as exc:
-        reason = f"{topic}: {exc}"
-        stats.reject(reason)
-        if on_error:
-            on_error(reason)
-        return []
+        return refuse(f"{topic}: {exc}")
     except Exception as exc:  # a bug must not take the node or the recording down
-        reason = f"{topic}: internal error {type(exc).__name__}: {exc}"
-        stats.reject(reason)
-        LOG.error("%s\n%s", reason, traceback.format_exc())
-        if on_error:
-            on_error(reason)
-        return []
+        return refuse(f"{topic}: internal error {type(exc).__name__}: {exc}", bug=True)
     age = None
     if stamp is not None and now_ns is not None:
         age = max(0.0, (now_ns() - stamp) / 1e9)

@@ -366,29 +366,36 @@ class Logged:
     error = info = warning
 
 
-@pytest.mark.ros
-def test_every_reason_shown_logged_and_warn_clears(monkeypatch):
+@pytest.fixture
+def logged_node(monkeypatch):
+    """A bare PerceptionNode whose log lines are collected in ``node.log.lines``."""
     with ros_context() as (ctx, _):
-        node = node_base.PerceptionNode("picky", context=ctx)
-        log = Logged()
-        monkeypatch.setattr(node, "get_logger", lambda: log)
-        node.processor = Picky()
+        node = node_base.PerceptionNode("logged", context=ctx)
+        node.log = Logged()
+        monkeypatch.setattr(node, "get_logger", lambda: node.log)
         try:
-            for k in range(6):
-                for _ in range(3 if k == 0 else 1):
-                    msg = Image(header=Header(frame_id=f"kind-{'abcdef'[k]}"))
-                    process_guarded(node.processor, "image", msg, node.stats, on_error=node.reject_logged)
-            level, values, message = levels_and_values(node)
-            shown = [k for k in values if k.startswith("rejected: ")]
-            assert len(shown) == 6 and level == 1                 # every reason, not the top 3
-            assert len(log.lines) == 6                            # one line per reason (throttled per reason)
-            assert all(any(f"kind-{c}" in line for line in log.lines) for c in "abcdef")
-            monkeypatch.setattr(node_base, "HOLD_S", 0.05)
-            time.sleep(0.1)
-            level, values, message = levels_and_values(node)
-            assert level == 0 and values["rejected"] == "8"       # back to OK; the counts remain
+            yield node
         finally:
             node.destroy_node()
+
+
+@pytest.mark.ros
+def test_every_reason_shown_logged_and_warn_clears(logged_node, monkeypatch):
+    node, log = logged_node, logged_node.log
+    node.processor = Picky()
+    for k in range(6):
+        for _ in range(3 if k == 0 else 1):
+            msg = Image(header=Header(frame_id=f"kind-{'abcdef'[k]}"))
+            process_guarded(node.processor, "image", msg, node.stats, on_error=node.reject_logged)
+    level, values, message = levels_and_values(node)
+    shown = [k for k in values if k.startswith("rejected: ")]
+    assert len(shown) == 6 and level == 1                 # every reason, not the top 3
+    assert len(log.lines) == 6                            # one line per reason (throttled per reason)
+    assert all(any(f"kind-{c}" in line for line in log.lines) for c in "abcdef")
+    monkeypatch.setattr(node_base, "HOLD_S", 0.05)
+    time.sleep(0.1)
+    level, values, message = levels_and_values(node)
+    assert level == 0 and values["rejected"] == "8"       # back to OK; the counts remain
 
 
 @pytest.mark.ros
@@ -409,16 +416,10 @@ def test_warn_when_skipping_most_frames_and_error_without_a_model(tmp_path):
 
 
 @pytest.mark.ros
-def test_tracker_resets_on_stamp_jumps_are_logged(monkeypatch):
-    with ros_context() as (ctx, _):
-        node = node_base.PerceptionNode("jumpy", context=ctx)
-        log = Logged()
-        monkeypatch.setattr(node, "get_logger", lambda: log)
-        node.attach_processor(AssociationProcessor())
-        try:
-            handler = node._make_handler("detections")
-            handler(many_detections(3, 5))
-            handler(many_detections(3, 1))
-            assert node.stats.time_jumps == 1 and any("went back" in line for line in log.lines)
-        finally:
-            node.destroy_node()
+def test_tracker_resets_on_stamp_jumps_are_logged(logged_node):
+    node = logged_node
+    node.attach_processor(AssociationProcessor())
+    handler = node._make_handler("detections")
+    handler(many_detections(3, 5))
+    handler(many_detections(3, 1))
+    assert node.stats.time_jumps == 1 and any("went back" in line for line in node.log.lines)
