@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence, TypeVar
@@ -92,16 +93,17 @@ def check_field(f: dataclasses.Field, value: Any, default: Any) -> None:
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
+        ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
     elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
     elif isinstance(default, str):
         ok = isinstance(value, str)
     elif isinstance(default, (list, tuple)):
-        ok = isinstance(value, (list, tuple)) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-        if ok and not all(math.isfinite(v) for v in value):
-            raise ConfigError(f"{name}={list(value)} has a value that is not a finite number", (name,))
+        items = value.tolist() if hasattr(value, "tolist") else value
+        ok = isinstance(items, (list, tuple)) and all(
+            isinstance(v, numbers.Real) and not isinstance(v, bool) for v in items)
+        if ok and not all(math.isfinite(v) for v in items):
+            raise ConfigError(f"{name}={list(items)} has a value that is not a finite number", (name,))
     if not ok:
         raise ConfigError(f"{name}={value!r} must be {_kind(default)}", (name,))
     spec_of(f).check(name, value)

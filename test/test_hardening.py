@@ -127,6 +127,25 @@ def test_runtime_values_that_would_disable_the_detector_are_refused(tmp_path):
             node.destroy_node()
 
 
+@pytest.mark.ros
+def test_a_bad_model_or_size_range_in_a_params_file_is_refused_at_start_up(tmp_path):
+    huge = bad_model(tmp_path, lambda d: d["stages"][0]["thresholds"].__setitem__(0, 1e30))
+    path = params_file(tmp_path, f"detector:\n  ros__parameters:\n    model: {huge}\n    min_size: 90.0\n"
+                       "    max_size: 30.0\n    class_id: 4\n")
+    with ros_context() as (ctx, _):
+        node = DetectorNode(context=ctx, cli_args=["--ros-args", "--params-file", path])
+        try:
+            cfg = node.config()
+            assert cfg.model == DetectorConfig().model and cfg.class_id == 4
+            assert (cfg.min_size, cfg.max_size) == (0.0, 0.0)
+            assert node.processor.detector is not None
+            assert params_of(node, ["model", "min_size"]) == {"model": cfg.model, "min_size": 0.0}
+            level, values, _ = levels_and_values(node)
+            assert level == 1 and {"parameter refused: model", "parameter refused: min_size"} <= set(values)
+        finally:
+            node.destroy_node()
+
+
 def test_bad_models_are_refused_with_a_reason(tmp_path):
     cases = [(lambda d: d["stages"][0]["thresholds"].__setitem__(0, 1e30), "threshold"),
              (lambda d: d["stages"][0].__setitem__("threshold", 1e30), "beyond"),
