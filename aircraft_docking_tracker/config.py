@@ -186,6 +186,17 @@ def load_yaml_parameters(path: str | Path, node_name: str | None = None) -> dict
     return params
 
 
+def tool_parameters(path: str | Path | None, default_file: str, node_name: str) -> dict[str, Any]:
+    """An offline tool's parameters: ``path`` if given (it must exist: a mistyped ``--params-file``
+    is an error, not silently the defaults), else the package's ``config/<default_file>`` if present."""
+    if path is not None and str(path):
+        if not Path(path).is_file():
+            raise ConfigError(f"parameter file {path} not found")
+        return load_yaml_parameters(path, node_name)
+    default = package_config_dir() / default_file
+    return load_yaml_parameters(default, node_name) if default.is_file() else {}
+
+
 def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in tree.items():

@@ -22,8 +22,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from aircraft_docking_tracker.config import (ConfigError, add_config_arguments, config_from_arguments,
-                                             load_yaml_parameters, package_config_dir)
+from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from multi_target_tracker.detector import Detector, DetectorConfig
 from multi_target_tracker.detector_node import NODE_NAME
 from multi_target_tracker.train_cascade import IMAGE_SUFFIXES
@@ -80,8 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    path = Path(args.params_file) if args.params_file else package_config_dir() / "detector.yaml"
-    base = load_yaml_parameters(path, NODE_NAME) if path.is_file() else {}
+    base = tool_parameters(args.params_file, "detector.yaml", NODE_NAME)
     config = config_from_arguments(DetectorConfig, args, base={k: v for k, v in base.items() if "." not in k})
     detector = Detector(config)
     out = sys.stdout if args.output == "-" else open(args.output, "w")

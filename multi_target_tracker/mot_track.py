@@ -22,8 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from aircraft_docking_tracker.config import (ConfigError, add_config_arguments, config_from_arguments,
-                                             load_yaml_parameters, package_config_dir)
+from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from multi_target_tracker import motchallenge as mc
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker
 from multi_target_tracker.kalman import KalmanConfig
@@ -84,10 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def configs_from(args) -> tuple[AssociationConfig, KalmanConfig]:
     """Association and Kalman configs: YAML file, then the command-line options on top."""
-    if args.params is not None and not Path(args.params).is_file():
-        raise ConfigError(f"parameter file {args.params} not found")
-    params = args.params or package_config_dir() / "association.yaml"
-    base = load_yaml_parameters(params, NODE_NAME) if Path(params).is_file() else {}
+    base = tool_parameters(args.params, "association.yaml", NODE_NAME)
     kalman_base = {k[len(KALMAN_PREFIX):]: v for k, v in base.items() if k.startswith(KALMAN_PREFIX)}
     assoc = config_from_arguments(AssociationConfig, args, base=base)
     kalman = config_from_arguments(KalmanConfig, args, prefix="kalman_", base=kalman_base)

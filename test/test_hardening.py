@@ -442,3 +442,17 @@ def test_tracker_resets_on_stamp_jumps_are_logged(logged_node):
     handler(many_detections(3, 5))
     handler(many_detections(3, 1))
     assert node.stats.time_jumps == 1 and any("went back" in line for line in node.log.lines)
+
+
+@pytest.mark.parametrize("tool, args", [("multi_target_tracker.detect", ["in"]),
+                                        ("aircraft_docking_tracker.sot_track", ["in"]),
+                                        ("multi_target_tracker.mot_track", ["det.txt"])])
+def test_tools_refuse_a_missing_params_file_instead_of_using_defaults(tmp_path, capsys, tool, args):
+    import importlib  # noqa: PLC0415
+
+    (tmp_path / "det.txt").write_text("1,-1,1,2,3,4\n")
+    (tmp_path / "in").mkdir()
+    module = importlib.import_module(tool)
+    flag = "--params" if tool.endswith("mot_track") else "--params-file"
+    code = module.main([str(tmp_path / a) for a in args] + [flag, str(tmp_path / "typo.yaml")])
+    assert code and "typo.yaml not found" in capsys.readouterr().err
