@@ -47,10 +47,12 @@ _DRAWABLE = 1e6  # pixel coordinates drawn at most this far out (NaN and 1e30 ar
 class DockingNodeConfig:
     """Message handling around the docking tracker core (topics are fixed at start-up)."""
 
-    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image")
+    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image (start-up only)",
+                             read_only=True)
     detection_max_age: float = param(0.5, "detections older or newer than this [s] than the image are "
                                      "not used for (re)acquisition", low=0.0, high=3600.0)
-    annotate_image: bool = param(False, "publish docking/image (bgr8, quadrilateral and particles drawn)")
+    annotate_image: bool = param(False, "publish docking/image (bgr8, quadrilateral and particles drawn; start-up "
+                                 "only)", read_only=True)
     max_drawn_particles: int = param(300, "particles drawn on docking/image at most", low=0, high=100000)
     max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) frames of more pixels than this; a compressed "
                                   "frame's size is read from its header before decoding", low=1, high=400000000)

@@ -140,22 +140,24 @@ class PerceptionNode(Node):
             default = getattr(defaults, name)
             descriptor = _descriptor(f, default)
             override = self._parameter_overrides.get(full)
+            problem = None
             if override is not None:
                 coerced = _coerce_override(override.value, default)
-                if coerced is not override.value:
+                try:   # checked before declaring: a refused value never becomes the parameter's value
+                    config_module.check_field(f, _from_ros(coerced, default), default)
                     self._parameter_overrides[full] = Parameter(full, value=coerced)
-            try:
-                param = self.declare_parameter(full, _ros_default(default), descriptor)
-                value = _from_ros(param.value, default)
-                config_module.check_field(f, value, default)
-            except (InvalidParameterValueException, ParameterException, config_module.ConfigError,
-                    TypeError, ValueError) as exc:
-                given = override.value if override is not None else None
-                self._refuse_at_start(full, f"{full}={given!r} refused: {_short(exc)}; keeping the default {default!r}")
-                if self.has_parameter(full):
-                    self.undeclare_parameter(full)
-                self.declare_parameter(full, _ros_default(default), descriptor, ignore_override=True)
-                value = default
+                except (config_module.ConfigError, TypeError, ValueError) as exc:
+                    problem = exc
+            if problem is None:
+                try:
+                    param = self.declare_parameter(full, _ros_default(default), descriptor)
+                except (InvalidParameterValueException, ParameterException, TypeError, ValueError) as exc:
+                    problem = exc   # rclpy refused the type (declaration did not happen)
+            if problem is not None:
+                self._refuse_at_start(full, f"{full}={override.value!r} refused: {_short(problem)}; keeping the "
+                                      f"default {default!r}")
+                param = self.declare_parameter(full, _ros_default(default), descriptor, ignore_override=True)
+            value = _from_ros(param.value, default)
             values[name] = value
         # cross-field rules: refuse the values the rule names (back to their defaults), keep the rest
         for _ in range(len(fields) + 1):

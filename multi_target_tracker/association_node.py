@@ -45,7 +45,8 @@ class AssociationOutputConfig:
     include_tentative: bool = param(False, "also publish tentative tracks (state 0)")
     include_coasting: bool = param(True, "also publish confirmed tracks coasting on prediction (state 2)")
     trail_length: int = param(20, "trail points per track in tracks/markers", low=0, high=1000)
-    annotate_image: bool = param(False, "subscribe to image and publish tracks/image with the tracks drawn")
+    annotate_image: bool = param(False, "subscribe to image and publish tracks/image with the tracks drawn "
+                                 "(start-up only)", read_only=True)
 
 
 @dataclass

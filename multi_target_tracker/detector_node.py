@@ -38,9 +38,11 @@ NODE_PREFIX = "node."
 class DetectorNodeConfig:
     """Message handling around the detector core (topics are fixed at start-up)."""
 
-    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image")
+    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image (start-up only)",
+                             read_only=True)
     frame_stride: int = param(1, "detect on every k-th received frame (others are passed over)", low=1, high=1000)
-    annotate_image: bool = param(False, "publish detections/image (bgr8 with the boxes drawn)")
+    annotate_image: bool = param(False, "publish detections/image (bgr8 with the boxes drawn; start-up only)",
+                                 read_only=True)
     max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) frames of more pixels than this; a compressed "
                                   "frame's size is read from its header before decoding", low=1, high=400000000)
 

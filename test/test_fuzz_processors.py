@@ -333,10 +333,24 @@ def test_configuration_validation_refuses_or_builds_a_working_processor():
     assert tried >= 100 and 0 < refused < tried, (tried, refused)
 
 
+def assert_reports_what_runs(node, name, from_ros, context) -> None:
+    for prefix, cls in SPECS[name].configs.items():
+        cfg = node.config(prefix)
+        for f in dataclasses.fields(cls):
+            param = node._parameters[prefix + f.name]
+            running = getattr(cfg, f.name)
+            if param.type_ == Parameter.Type.NOT_SET:
+                assert running in ([], ()), (prefix + f.name, running)
+                continue
+            reported = from_ros(param.value, getattr(cls(), f.name))
+            assert reported == running or (isinstance(running, (list, tuple)) and list(reported) == list(running)), \
+                (prefix + f.name, reported, running, context)
+
+
 @pytest.mark.ros
 def test_nodes_report_the_parameters_they_run_under_random_overrides():
-    """Start each node with random overrides (bad ones among them): it starts, and for every field
-    ``get_parameters`` reports the value its config holds."""
+    """Start each node with random overrides (bad ones among them), then set them again at runtime:
+    it starts and keeps running, and for every field the parameter reports the value its config holds."""
     from aircraft_docking_tracker.config import spec_of  # noqa: PLC0415
     from aircraft_docking_tracker.node_base import _from_ros  # noqa: PLC0415
 
@@ -359,18 +373,13 @@ def test_nodes_report_the_parameters_they_run_under_random_overrides():
             node = NODES[name](context=ctx, parameter_overrides=overrides)
             started += 1
             try:
-                for prefix, cls in SPECS[name].configs.items():
-                    cfg = node.config(prefix)
-                    for f in dataclasses.fields(cls):
-                        param = node._parameters[prefix + f.name]
-                        running = getattr(cfg, f.name)
-                        if param.type_ == Parameter.Type.NOT_SET:
-                            assert running in ([], ()), (prefix + f.name, running)
-                            continue
-                        reported = _from_ros(param.value, getattr(cls(), f.name))
-                        assert reported == running or (isinstance(running, (list, tuple))
-                                                       and list(reported) == list(running)), \
-                            (prefix + f.name, reported, running, overrides)
+                assert_reports_what_runs(node, name, _from_ros, overrides)
+                for p in overrides[:6]:       # the same random values again, now at runtime, one by one
+                    try:
+                        node.set_parameters([p])
+                    except Exception as exc:  # noqa: BLE001 - rclpy raises on a type change; that is a refusal
+                        assert "type" in str(exc).lower(), exc
+                    assert_reports_what_runs(node, name, _from_ros, [p])
                 node.diagnostic_status()
             finally:
                 node.destroy_node()
