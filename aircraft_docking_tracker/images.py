@@ -41,6 +41,21 @@ def _check_size(width: int, height: int, max_pixels: int | None, what: str = "im
 _JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 
 
+def _check_png_chunks(data: bytes) -> None:
+    """Every chunk of a PNG must fit in the data: OpenCV's reader allocates what a chunk's length
+    field claims (a flipped bit in a 1 kB file cost 512 MB) before libpng checks anything."""
+    pos, end = 8, len(data)
+    while pos + 8 <= end:
+        length = int.from_bytes(data[pos:pos + 4], "big")
+        kind = data[pos + 4:pos + 8]
+        if pos + 12 + length > end:
+            raise ImageConversionError(f"compressed png is corrupt or truncated: chunk {kind!r} claims {length} "
+                                       f"bytes, {max(0, end - pos - 12)} remain")
+        pos += 12 + length
+        if kind == b"IEND":
+            return
+
+
 def compressed_dimensions(data: bytes) -> tuple[str, int, int] | None:
     """``(format, width, height)`` read from a PNG, JPEG or BMP header without decoding, else None."""
     if data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) >= 24 and data[12:16] == b"IHDR":
@@ -224,6 +239,8 @@ def _decode_compressed(msg, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
     if width <= 0 or height <= 0:
         raise ImageConversionError(f"compressed {kind} header gives zero size ({width}x{height})")
     _check_size(width, height, max_pixels, f"compressed {kind}")
+    if kind == "png":
+        _check_png_chunks(raw)
     try:
         image = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     except cv2.error as exc:

@@ -271,6 +271,12 @@ def test_a_png_decompression_bomb_is_refused_from_its_header():
         to_mono8(CompressedImage(format="jpeg", data=bytes(jpg)))
     with pytest.raises(ImageConversionError, match="could not be decoded"):
         to_mono8(CompressedImage(format="tiff", data=b"II*\0" + bytes(100)))
+    # a 1 kB PNG whose chunk length claims 512 MB: OpenCV's reader would allocate it before checking
+    ok, png = cv2.imencode(".png", np.zeros((32, 48), np.uint8))
+    png = bytearray(png.tobytes())
+    png[33:37] = struct.pack(">I", 2**29)
+    with pytest.raises(ImageConversionError, match="chunk"):
+        to_mono8(CompressedImage(format="png", data=bytes(png)))
 
 
 def test_oversized_frames_are_refused_by_each_image_processor():
