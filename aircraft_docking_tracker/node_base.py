@@ -116,6 +116,7 @@ class PerceptionNode(Node):
         self._publishers_by_topic: dict[str, Any] = {}
         self._process_lock = threading.Lock()
         self.config_errors: dict[str, str] = {}   # parameter -> why its value was refused at start-up
+        self.unknown_parameters: list[str] = []   # overrides naming no parameter (typos, other nodes')
         self._logged_at: dict[str, float] = {}   # rejection kind -> when it was last logged
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diagnostics_timer = self.create_timer(1.0, self.publish_diagnostics)
@@ -188,9 +189,11 @@ class PerceptionNode(Node):
 
     def check_unknown_parameters(self) -> None:
         """Warn about (and list in diagnostics) overrides that name no parameter: a typo in a
-        parameter file would otherwise be ignored without a word."""
+        parameter file would otherwise be ignored without a word. They do not raise the level: a
+        ``/**`` section shared by several nodes legitimately holds other nodes' parameters."""
         for name in sorted(set(self._parameter_overrides) - set(self._parameters)):
-            self._refuse_at_start(name, f"{name}: no such parameter of {self.get_name()} (ignored; a typo?)")
+            self.unknown_parameters.append(name)
+            self.get_logger().warning(f"{name}: no such parameter of {self.get_name()} (ignored; a typo?)")
 
     def config(self, prefix: str = ""):
         return self._configs[prefix][1]
@@ -330,6 +333,8 @@ class PerceptionNode(Node):
             values[f"rejected: {reason}"] = str(count)
         for name, why in self.config_errors.items():
             values[f"parameter refused: {name}"] = why
+        for name in self.unknown_parameters:
+            values[f"parameter unknown: {name}"] = "ignored: no such parameter (a typo?)"
         health = None
         if self.processor is not None:
             values.update({k: str(v) for k, v in self.processor.status().items()})
