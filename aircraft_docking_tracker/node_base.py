@@ -14,15 +14,21 @@ A node is thin::
         run_node(DetectorNode, args)
 
 * ``declare_config`` turns a config dataclass (``config.param`` fields) into parameters with
-  descriptors and ranges; values from ``--params-file`` that break a range are refused with the
-  reason, logged, and the default is kept; a runtime ``ros2 param set`` outside its range or
-  failing the config's own ``validate()`` is refused with the reason; the node keeps running.
+  descriptors and ranges; every value goes through ``config.validate`` (type, finiteness, range,
+  then the config's cross-field ``validate()``). A bad value from ``--params-file`` is refused on
+  its own (logged, listed in diagnostics, its parameter back to the default), the rest applies; a
+  runtime ``ros2 param set`` that fails is refused with the reason and the previous configuration
+  kept; the node keeps running.
 * ``attach_processor`` subscribes to the processor's inputs (images: sensor-data QoS, keep the
   newest frame, processed off the executor thread, skipped frames counted; other inputs: reliable,
   in order), publishes its outputs (reliable) and runs everything through
   ``processing.process_guarded`` — the same call the offline runner makes.
 * ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) at 1 Hz: rate, processing time, stamp
-  latency, received / skipped / rejected inputs with reasons, time jumps, and processor status.
+  latency, received / skipped / rejected inputs with every reason, time jumps, refused parameters
+  and processor status. Level: ERROR while the processor cannot work (``health()``) or after
+  recent internal errors, WARN after recent rejections, when most frames are skipped or when
+  parameter values were refused, else OK (see ``HOLD_S``).
+* ``run_node``: ``--help`` prints usage and parameters; bad ``--params-file`` is one line, exit 2.
 """
 from __future__ import annotations
 
