@@ -10,6 +10,8 @@ constants, one set of defaults, and one validation.
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence, TypeVar
@@ -20,7 +22,15 @@ T = TypeVar("T")
 
 
 class ConfigError(ValueError):
-    """A configuration value outside its declared range or choices."""
+    """A configuration value outside its declared range or choices, or a broken cross-field rule.
+
+    ``fields`` names the fields the error is about (one for a range, two for ``min_size <= max_size``),
+    so that a node can refuse exactly those values and keep the rest of a parameter file.
+    """
+
+    def __init__(self, message: str, fields: Sequence[str] = ()):
+        super().__init__(message)
+        self.fields = tuple(fields)
 
 
 @dataclass(frozen=True)
@@ -36,14 +46,16 @@ class ParamSpec:
     def check(self, name: str, value: Any) -> None:
         """Raise ConfigError with a reason when ``value`` breaks the spec."""
         if self.choices is not None and value not in self.choices:
-            raise ConfigError(f"{name}={value!r} is not one of {list(self.choices)}")
+            raise ConfigError(f"{name}={value!r} is not one of {list(self.choices)}", (name,))
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             if value != value:  # NaN
-                raise ConfigError(f"{name} is NaN")
+                raise ConfigError(f"{name} is NaN", (name,))
+            if isinstance(value, float) and math.isinf(value) and self.low is None and self.high is None:
+                raise ConfigError(f"{name}={value} is not finite", (name,))
             if self.low is not None and value < self.low:
-                raise ConfigError(f"{name}={value} is below its minimum {self.low}")
+                raise ConfigError(f"{name}={value} is below its minimum {self.low}", (name,))
             if self.high is not None and value > self.high:
-                raise ConfigError(f"{name}={value} is above its maximum {self.high}")
+                raise ConfigError(f"{name}={value} is above its maximum {self.high}", (name,))
 
 
 def param(default: Any, description: str, *, low: float | None = None, high: float | None = None,
@@ -59,10 +71,54 @@ def spec_of(f: dataclasses.Field) -> ParamSpec:
     return f.metadata.get("spec") or ParamSpec(description=f.name)
 
 
+def _kind(default: Any) -> str:
+    if isinstance(default, bool):
+        return "a boolean"
+    if isinstance(default, int):
+        return "an integer"
+    if isinstance(default, float):
+        return "a number"
+    if isinstance(default, str):
+        return "a string"
+    if isinstance(default, (list, tuple)):
+        return "a list of numbers"
+    return type(default).__name__
+
+
+def check_field(f: dataclasses.Field, value: Any, default: Any) -> None:
+    """One field's rules: the default's type (an int is fine for a float), finite numbers (lists
+    too), then the spec's range or choices. Raises ConfigError naming the field."""
+    name = f.name
+    ok = True
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, int):
+        ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+    elif isinstance(default, (list, tuple)):
+        items = value.tolist() if hasattr(value, "tolist") else value
+        ok = isinstance(items, (list, tuple)) and all(
+            isinstance(v, numbers.Real) and not isinstance(v, bool) for v in items)
+        if ok and not all(math.isfinite(v) for v in items):
+            raise ConfigError(f"{name}={list(items)} has a value that is not a finite number", (name,))
+    if not ok:
+        raise ConfigError(f"{name}={value!r} must be {_kind(default)}", (name,))
+    spec_of(f).check(name, value)
+
+
 def validate(config: Any) -> Any:
-    """Check every field of a config dataclass against its spec; return it unchanged."""
+    """Check every field of a config dataclass against its type and spec, then the config's own
+    cross-field rules (its ``validate()`` method, if any); return it unchanged.
+
+    This is the one validation every configuration goes through: node start-up
+    (``node_base.PerceptionNode.declare_config``), ``ros2 param set`` and the offline tools.
+    """
+    defaults = type(config)()
     for f in dataclasses.fields(config):
-        spec_of(f).check(f.name, getattr(config, f.name))
+        check_field(f, getattr(config, f.name), getattr(defaults, f.name))
     post = getattr(config, "validate", None)
     if callable(post):
         post()
@@ -77,7 +133,7 @@ def from_mapping(cls: type[T], values: Mapping[str, Any], *, strict: bool = True
     names = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(values) - set(names))
     if unknown and strict:
-        raise ConfigError(f"unknown {cls.__name__} parameter(s): {', '.join(unknown)}")
+        raise ConfigError(f"unknown {cls.__name__} parameter(s): {', '.join(unknown)}", unknown)
     kwargs = {}
     defaults = cls()
     for name, value in values.items():
@@ -99,9 +155,14 @@ def load_yaml_parameters(path: str | Path, node_name: str | None = None) -> dict
     ``/**/node_name``, then ``node_name`` or ``/some/namespace/node_name`` (later ones win).
     Without, takes the first section.
     """
-    data = yaml.safe_load(Path(path).read_text()) or {}
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: not a ROS 2 parameter file")
+    try:
+        data = yaml.safe_load(Path(path).read_text()) or {}
+    except OSError as exc:
+        raise ConfigError(f"cannot read parameter file {path}: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path} is not valid YAML: {str(exc).splitlines()[0] if str(exc) else exc}") from None
+    if not isinstance(data, dict) or not all(isinstance(v, dict) or v is None for v in data.values()):
+        raise ConfigError(f"{path}: not a ROS 2 parameter file (node: {{ros__parameters: {{...}}}})")
     sections = {str(k).lstrip("/"): (v or {}) for k, v in data.items()}
     if node_name is None:
         chosen = [next(iter(sections.values()), {})]
@@ -118,8 +179,22 @@ def load_yaml_parameters(path: str | Path, node_name: str | None = None) -> dict
         chosen = [sections[k] for _, k in matching]
     params: dict[str, Any] = {}
     for section in chosen:
-        params.update(_flatten(section.get("ros__parameters", {}) or {}))
+        tree = section.get("ros__parameters", {}) or {}
+        if not isinstance(tree, Mapping):
+            raise ConfigError(f"{path}: ros__parameters must be a mapping of names to values")
+        params.update(_flatten(tree))
     return params
+
+
+def tool_parameters(path: str | Path | None, default_file: str, node_name: str) -> dict[str, Any]:
+    """An offline tool's parameters: ``path`` if given (it must exist: a mistyped ``--params-file``
+    is an error, not silently the defaults), else the package's ``config/<default_file>`` if present."""
+    if path is not None and str(path):
+        if not Path(path).is_file():
+            raise ConfigError(f"parameter file {path} not found")
+        return load_yaml_parameters(path, node_name)
+    default = package_config_dir() / default_file
+    return load_yaml_parameters(default, node_name) if default.is_file() else {}
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

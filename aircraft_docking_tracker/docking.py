@@ -54,10 +54,13 @@ class DockingConfig(FilterConfig):
                                        low=-1e9, high=1e9)
 
     def validate(self) -> None:
-        """The cross-field check ``config.validate`` calls: initial_box is empty or a real box."""
+        """The cross-field checks ``config.validate`` calls: the filter's, and initial_box is empty or
+        a real box (finite x, y, w, h with w, h > 0; ``check_field`` already refused NaN and inf)."""
+        super().validate()
         box = self.initial_box
-        if len(box) not in (0, 4) or (len(box) == 4 and not (box[2] > 0 and box[3] > 0)):
-            raise ConfigError(f"initial_box must be empty or x, y, w, h with w, h > 0, got {list(box)}")
+        if len(box) not in (0, 4) or (len(box) == 4 and not (np.isfinite(box).all() and box[2] > 0 and box[3] > 0)):
+            raise ConfigError(f"initial_box must be empty or x, y, w, h with w, h > 0, got {list(box)}",
+                              ("initial_box",))
 
 
 @dataclass
@@ -93,7 +96,8 @@ def best_detection(table: np.ndarray | None, class_id: int = -1, min_score: floa
         return None
     boxes = np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(float)
     scores = np.asarray(table["score"], dtype=float)
-    ok = np.isfinite(boxes).all(axis=1) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0) & (scores >= min_score)
+    # finite, inside any plausible image (|v| < 1e6 px) and of positive size
+    ok = (np.abs(boxes) < 1e6).all(axis=1) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0) & (scores >= min_score)
     if class_id >= 0:
         ok &= np.asarray(table["class_id"]) == class_id
     if not ok.any():

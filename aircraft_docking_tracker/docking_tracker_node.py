@@ -32,25 +32,33 @@ import numpy as np
 
 from .bag import stamp_to_ns
 from .config import param
+from .images import MAX_PIXELS
 from .docking import LOST, STATE_NAMES, TRACKING, WAITING, DockingConfig, DockingResult, DockingTracker, state_row
 from .node_base import PerceptionNode, run_node
 from .object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
-from .processing import MessageProcessor, ProcessorSpec, Rejected
+from .processing import MessageProcessor, ProcessorSpec, Rejected, best_rows
 
 NODE_NAME = "docking_tracker"
 NODE_PREFIX = "node."
 COLORS = {TRACKING: (0.1, 1.0, 0.2), LOST: (1.0, 0.2, 0.1)}
+_DRAWABLE = 1e6  # pixel coordinates drawn at most this far out (NaN and 1e30 are not)
 
 
 @dataclass
 class DockingNodeConfig:
     """Message handling around the docking tracker core (topics are fixed at start-up)."""
 
-    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image")
+    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image (start-up only)",
+                             read_only=True)
     detection_max_age: float = param(0.5, "detections older or newer than this [s] than the image are "
                                      "not used for (re)acquisition", low=0.0, high=3600.0)
-    annotate_image: bool = param(False, "publish docking/image (bgr8, quadrilateral and particles drawn)")
+    annotate_image: bool = param(False, "publish docking/image (bgr8, quadrilateral and particles drawn; start-up "
+                                 "only)", read_only=True)
     max_drawn_particles: int = param(300, "particles drawn on docking/image at most", low=0, high=100000)
+    max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) frames of more pixels than this; a compressed "
+                                  "frame's size is read from its header before decoding", low=1, high=400000000)
+    max_detections: int = param(1000, "keep the best this many rows of a detections message (the rest are "
+                                "dropped and counted)", low=1, high=1000000)
 
 
 def draw_docking(bgr: np.ndarray, result: DockingResult, max_particles: int) -> np.ndarray:
@@ -62,11 +70,13 @@ def draw_docking(bgr: np.ndarray, result: DockingResult, max_particles: int) -> 
         cv2.putText(out, "waiting", (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 200, 255), 2)
         return out
     for cx, cy in result.particle_states[:max_particles, :2, 2]:
-        if np.isfinite(cx) and np.isfinite(cy):
+        if abs(cx) < _DRAWABLE and abs(cy) < _DRAWABLE:          # finite and within OpenCV's int range
             cv2.circle(out, (int(round(cx)), int(round(cy))), 1, (255, 255, 255), -1)
     r, g, b = COLORS[result.state]
     color = (int(255 * b), int(255 * g), int(255 * r))
-    cv2.polylines(out, [np.round(result.quad).astype(np.int32)], True, color, 2, cv2.LINE_AA)
+    quad = result.quad
+    if (np.abs(quad) < _DRAWABLE).all():
+        cv2.polylines(out, [np.round(quad).astype(np.int32)], True, color, 2, cv2.LINE_AA)
     cv2.putText(out, f"{STATE_NAMES[result.state]} S={result.score:.2f} n={result.particles}", (8, 20),
                 cv2.FONT_HERSHEY_SIMPLEX, 0.6, color, 2)
     return out
@@ -94,7 +104,9 @@ class DockingProcessor(MessageProcessor):
 
     def process(self, topic, msg):
         if topic == "detections":
-            self._detections = (stamp_to_ns(msg.header.stamp), cloud_to_table(msg, DETECTION_DTYPE))
+            table = best_rows(cloud_to_table(msg, DETECTION_DTYPE), self.node.max_detections,
+                              self.report_rejection, "detections")
+            self._detections = (stamp_to_ns(msg.header.stamp), table)
             return []
         if topic == "docking/init":
             self._init(msg)
@@ -102,7 +114,12 @@ class DockingProcessor(MessageProcessor):
         return self._image(msg)
 
     def _init(self, msg) -> None:
-        points = np.array([[p.x, p.y] for p in msg.polygon.points], dtype=float).reshape(-1, 2)
+        points = np.array([[p.x, p.y] for p in msg.polygon.points[:5]], dtype=float).reshape(-1, 2)
+        if len(msg.polygon.points) > 4:
+            raise Rejected(f"docking/init needs 4 points (quadrilateral) or 2 (box corners), got "
+                           f"{len(msg.polygon.points)}")
+        if not (np.abs(points) < _DRAWABLE).all():
+            raise Rejected(f"docking/init has a point that is not finite or beyond +-{_DRAWABLE:g} px")
         if len(points) == 0:
             self.tracker.stop()                    # an empty polygon: stop, wait for a new start
             return
@@ -119,7 +136,7 @@ class DockingProcessor(MessageProcessor):
         from .scenarios.messages import quad_to_polygon  # noqa: PLC0415
         from visualization_msgs.msg import MarkerArray  # noqa: PLC0415
 
-        grey = to_mono8(msg)
+        grey = to_mono8(msg, self.node.max_image_pixels)
         result = self.tracker.step(grey, self._fresh_detections(stamp_to_ns(msg.header.stamp)))
         self.last = result
         self.starts += int(result.started)
@@ -141,7 +158,7 @@ class DockingProcessor(MessageProcessor):
         if self.node.annotate_image:
             from .images import numpy_to_image  # noqa: PLC0415
 
-            drawn = draw_docking(to_bgr8(msg), result, self.node.max_drawn_particles)
+            drawn = draw_docking(to_bgr8(msg, self.node.max_image_pixels), result, self.node.max_drawn_particles)
             out.append(("docking/image", numpy_to_image(drawn, "bgr8", msg.header)))
         return out
 
@@ -187,7 +204,7 @@ class DockingTrackerNode(PerceptionNode):
 
 
 def main(args=None):
-    run_node(DockingTrackerNode, args)
+    return run_node(DockingTrackerNode, args)
 
 
 if __name__ == "__main__":

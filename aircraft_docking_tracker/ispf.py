@@ -44,7 +44,7 @@ import numpy as np
 
 from . import affine_group as ag
 from .appearance import AppearanceConfig, ObservationModel, PoseEstimator
-from .config import param
+from .config import ConfigError, param
 
 
 class FrameError(ValueError):
@@ -85,6 +85,12 @@ class FilterConfig(AppearanceConfig):
                                  "template sizes", low=0.5, high=8.0)
     min_side: float = param(6.0, "smallest object side [px] a particle may shrink to", low=1.0, high=1000.0)
     seed: int = param(0, "random seed (reproducible runs)", low=0, high=2**31 - 1)
+
+    def validate(self) -> None:
+        """Cross-field rule (``config.validate`` calls it): the first batch fits the particle budget."""
+        if self.n_initial > self.n_total:
+            raise ConfigError(f"n_initial={self.n_initial} must not exceed n_total={self.n_total}",
+                              ("n_initial", "n_total"))
 
     def sigmas(self) -> np.ndarray:
         """diag(Σ_g)^(1/2) in the basis order E1..E6."""

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from .bag import BagError, BagReader, BagWriter, check_outputs, get_message_class
-from .config import ConfigError, load_yaml_parameters, package_config_dir
+from .config import ConfigError, tool_parameters
 from .processing import MessageProcessor, ProcessingStats, ProcessorSpec, process_guarded
 
 # node name -> module with a SPEC (ProcessorSpec); the YAML file of each is config/<name>.yaml
@@ -47,8 +47,7 @@ def build_processor(node: str, params_file: str | Path | None = None,
                     overrides: dict[str, Any] | None = None) -> MessageProcessor:
     """The processor of ``node`` configured from a ROS 2 parameter file (default: the package's)."""
     spec = processor_spec(node)
-    path = Path(params_file) if params_file else package_config_dir() / f"{node}.yaml"
-    parameters = load_yaml_parameters(path, spec.node_name) if path.is_file() else {}
+    parameters = tool_parameters(params_file, f"{node}.yaml", spec.node_name)
     parameters.update(overrides or {})
     return spec.build(spec.configs_from_parameters(parameters))
 

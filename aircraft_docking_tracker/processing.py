@@ -40,10 +40,16 @@ class MessageProcessor:
     #: Set by whoever runs the processor (live node, offline runner) to count a partial rejection,
     #: e.g. invalid rows dropped from a message that is otherwise processed.
     on_rejected: Callable[[str], None] | None = None
+    #: Set likewise to log a notable event that is not a rejection (e.g. the tracks were reset).
+    on_event: Callable[[str], None] | None = None
 
     def report_rejection(self, reason: str) -> None:
         if self.on_rejected is not None:
             self.on_rejected(reason)
+
+    def report_event(self, text: str) -> None:
+        if self.on_event is not None:
+            self.on_event(text)
 
     def process(self, topic: str, msg: Any) -> list[tuple[str, Any]]:
         """Handle one input message; return ``(output topic, message)`` pairs to publish."""
@@ -56,10 +62,27 @@ class MessageProcessor:
         """Extra key/values for the diagnostics status (e.g. number of tracks)."""
         return {}
 
+    def health(self) -> tuple[int, str] | None:
+        """``(level, message)`` when the processor cannot do its job (level ``ERROR``, e.g. no model)
+        or does it poorly (``WARN``); None when fine. Shown as the node's diagnostics level."""
+        return None
+
+
+#: Diagnostic levels (the values of diagnostic_msgs/DiagnosticStatus, without importing it here).
+OK, WARN, ERROR = 0, 1, 2
+#: Distinct rejection reasons counted one by one; any further kinds add to one "other" counter.
+MAX_REASONS = 64
+OTHER_REASONS = "other reasons (more than 64 kinds)"
+
 
 @dataclass
 class ProcessingStats:
-    """Counters behind ``/diagnostics``: rates, latency, skipped and rejected inputs."""
+    """Counters behind ``/diagnostics``: rates, latency, skipped and rejected inputs.
+
+    Every rejection reason is counted under its kind (numbers folded, at most ``MAX_REASONS``
+    kinds) with the time it was last seen, so diagnostics can show every reason and tell recent
+    trouble (WARN) from old (back to OK).
+    """
 
     window_s: float = 5.0
     received: int = 0
@@ -67,16 +90,45 @@ class ProcessingStats:
     skipped: int = 0
     time_jumps: int = 0
     rejected: collections.Counter = field(default_factory=collections.Counter)
+    last_rejected: dict = field(default_factory=dict)    # reason kind -> time.monotonic() last seen
     _events: collections.deque = field(default_factory=lambda: collections.deque(maxlen=2000))
+    _received_at: collections.deque = field(default_factory=lambda: collections.deque(maxlen=2000))
+    _skipped_at: collections.deque = field(default_factory=lambda: collections.deque(maxlen=2000))
     _last_stamp: dict[str, int] = field(default_factory=dict)
 
     def record(self, processing_s: float, age_s: float | None) -> None:
         self.processed += 1
         self._events.append((time.monotonic(), processing_s, age_s))
 
-    def reject(self, reason: str) -> None:
-        """Count a rejection under its kind (numbers folded, see ``_reason_key``)."""
-        self.rejected[_reason_key(reason)] += 1
+    def receive(self) -> None:
+        self.received += 1
+        self._received_at.append(time.monotonic())
+
+    def skip(self) -> None:
+        """A frame replaced by a newer one before it was processed (keep-newest under overload)."""
+        self.skipped += 1
+        self._skipped_at.append(time.monotonic())
+
+    def reject(self, reason: str) -> str:
+        """Count a rejection under its kind (numbers folded, see ``reason_key``); return the kind."""
+        key = reason_key(reason)
+        if key not in self.rejected and len(self.rejected) >= MAX_REASONS:
+            key = OTHER_REASONS
+        self.rejected[key] += 1
+        self.last_rejected[key] = time.monotonic()
+        return key
+
+    def recent_rejections(self, within_s: float) -> dict[str, int]:
+        """Reason kinds seen in the last ``within_s`` seconds, with their total counts."""
+        now = time.monotonic()
+        return {k: self.rejected[k] for k, t in self.last_rejected.items() if now - t <= within_s}
+
+    def skip_fraction(self) -> float:
+        """Of the frames that arrived in the last ``window_s`` seconds, the fraction skipped."""
+        now = time.monotonic()
+        skipped = sum(1 for t in self._skipped_at if now - t <= self.window_s)
+        taken = sum(1 for t in self._received_at if now - t <= self.window_s)
+        return skipped / (skipped + taken) if skipped + taken else 0.0
 
     @property
     def rejected_total(self) -> int:
@@ -109,40 +161,51 @@ def message_stamp_ns(msg: Any) -> int | None:
 
 def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: ProcessingStats,
                     now_ns: Callable[[], int] | None = None,
-                    on_error: Callable[[str], None] | None = None) -> list[tuple[str, Any]]:
+                    on_error: Callable[[str], None] | None = None,
+                    on_time_jump: Callable[[str], None] | None = None) -> list[tuple[str, Any]]:
     """Run ``processor.process`` with the rules every node shares.
 
     * a stamp older than the last one on the same topic (a looped bag, a restarted player) is a
-      time jump: counted, the processor is reset, and the message is processed as a fresh start;
+      time jump: counted, reported to ``on_time_jump``, the processor is reset (a failing reset is
+      an internal error, never an exception out of here), and the message is processed afresh;
     * ``ValueError`` (``Rejected``, ``ImageConversionError``, ...) rejects the message with its
       reason; any other exception is an internal error, logged with its traceback and counted;
     * processing time and stamp-to-output latency (with ``now_ns``, the node's clock) are recorded.
     """
-    stats.received += 1
-    stamp = message_stamp_ns(msg)
+    stats.receive()
+
+    def refuse(reason: str, bug: bool = False) -> list:
+        stats.reject(reason)
+        if bug:
+            LOG.error("%s\n%s", reason, traceback.format_exc())
+        if on_error:
+            on_error(reason)
+        return []
+
+    try:
+        stamp = message_stamp_ns(msg)
+    except (AttributeError, TypeError, ValueError, OverflowError) as exc:
+        return refuse(f"{topic}: bad header stamp ({exc})")
     if stamp is not None:
         last = stats._last_stamp.get(topic)
         if last is not None and stamp < last:
             stats.time_jumps += 1
-            processor.reset()
             stats._last_stamp.clear()
+            if on_time_jump:
+                on_time_jump(f"{topic}: stamp went back by {(last - stamp) / 1e9:.3f} s (a looped or restarted "
+                             f"source); state reset, processing starts afresh")
+            try:
+                processor.reset()
+            except Exception as exc:  # a reset must not take the node down either
+                return refuse(f"{topic}: internal error on reset {type(exc).__name__}: {exc}", bug=True)
         stats._last_stamp[topic] = stamp
     started = time.perf_counter()
     try:
         outputs = processor.process(topic, msg)
     except ValueError as exc:
-        reason = f"{topic}: {exc}"
-        stats.reject(reason)
-        if on_error:
-            on_error(reason)
-        return []
+        return refuse(f"{topic}: {exc}")
     except Exception as exc:  # a bug must not take the node or the recording down
-        reason = f"{topic}: internal error {type(exc).__name__}: {exc}"
-        stats.reject(reason)
-        LOG.error("%s\n%s", reason, traceback.format_exc())
-        if on_error:
-            on_error(reason)
-        return []
+        return refuse(f"{topic}: internal error {type(exc).__name__}: {exc}", bug=True)
     age = None
     if stamp is not None and now_ns is not None:
         age = max(0.0, (now_ns() - stamp) / 1e9)
@@ -153,11 +216,25 @@ def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: Pr
 _NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 
-def _reason_key(reason: str, limit: int = 120) -> str:
+def reason_key(reason: str, limit: int = 120) -> str:
     """Reasons are counted by kind: numbers become ``#`` so that a camera sending frames truncated
     to varying lengths adds to one counter, not one key per length (memory stays bounded)."""
     key = _NUMBER.sub("#", reason)
     return key if len(key) <= limit else key[:limit] + "..."
+
+
+def best_rows(table, limit: int, report: Callable[[str], None] | None = None, what: str = "rows"):
+    """At most ``limit`` rows of an object table, the highest ``score`` first kept (in their
+    original order); the cut is reported as a counted reason. Bounds the work per message."""
+    if len(table) <= limit:
+        return table
+    import numpy as np  # noqa: PLC0415
+
+    scores = np.nan_to_num(np.asarray(table["score"], np.float64), nan=-np.inf)
+    keep = np.sort(np.argsort(-scores, kind="stable")[:limit])
+    if report is not None:
+        report(f"{what}: {len(table)} rows, more than the limit of {limit}; the best {limit} kept")
+    return table[keep]
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .config import (ConfigError, add_config_arguments, config_from_arguments, load_yaml_parameters,
-                     package_config_dir)
+from .config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from .bag import check_outputs
 from .docking import DockingConfig, DockingTracker
 
@@ -213,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, help="write x,y,w,h per frame here (default: print a summary only)")
     parser.add_argument("--quads", type=Path, help="write the quadrilaterals x1,y1,...,x4,y4 per frame here")
     parser.add_argument("--max-frames", type=int, default=0, help="stop after this many frames (0: all)")
-    parser.add_argument("--params-file", type=Path, default=package_config_dir() / "docking_tracker.yaml",
+    parser.add_argument("--params-file", type=Path, default=None,
                         help="ROS 2 parameter file (default: config/docking_tracker.yaml)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_config_arguments(parser, DockingConfig)
@@ -223,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        base = load_yaml_parameters(args.params_file, NODE_NAME) if args.params_file.is_file() else {}
+        base = tool_parameters(args.params_file, "docking_tracker.yaml", NODE_NAME)
         config = config_from_arguments(DockingConfig, args, base=base)
         seq = open_sequence(args.input)
         check_outputs([args.out, args.quads], seq.files, "sot_track")

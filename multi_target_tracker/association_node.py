@@ -25,15 +25,17 @@ import numpy as np
 
 from aircraft_docking_tracker.bag import stamp_to_ns
 from aircraft_docking_tracker.config import param
+from aircraft_docking_tracker.images import MAX_PIXELS
 from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
-from aircraft_docking_tracker.processing import MessageProcessor, ProcessorSpec
+from aircraft_docking_tracker.processing import MessageProcessor, ProcessorSpec, Rejected, best_rows
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker, Tracks
 from multi_target_tracker.kalman import KalmanConfig
 from multi_target_tracker.mot_track import KALMAN_PREFIX, NODE_NAME
 
 OUTPUT_PREFIX = "output."
+NODE_PREFIX = "node."
 _IMAGE_BUFFER = 30
 
 
@@ -44,7 +46,18 @@ class AssociationOutputConfig:
     include_tentative: bool = param(False, "also publish tentative tracks (state 0)")
     include_coasting: bool = param(True, "also publish confirmed tracks coasting on prediction (state 2)")
     trail_length: int = param(20, "trail points per track in tracks/markers", low=0, high=1000)
-    annotate_image: bool = param(False, "subscribe to image and publish tracks/image with the tracks drawn")
+    annotate_image: bool = param(False, "subscribe to image and publish tracks/image with the tracks drawn "
+                                 "(start-up only)", read_only=True)
+
+
+@dataclass
+class AssociationNodeConfig:
+    """Bounds on the work one input message may cost (apply at once)."""
+
+    max_detections: int = param(1000, "keep the best this many rows of a detections message (the rest are "
+                                "dropped and counted)", low=1, high=1000000)
+    max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) images of more pixels than this "
+                                  "(output.annotate_image)", low=1, high=400000000)
 
 
 def tracks_to_table(tracks: Tracks) -> np.ndarray:
@@ -82,9 +95,10 @@ class AssociationProcessor(MessageProcessor):
     """Message conversion around :class:`MultiTargetTracker` (live node and offline runner alike)."""
 
     def __init__(self, config: AssociationConfig | None = None, kalman: KalmanConfig | None = None,
-                 output: AssociationOutputConfig | None = None):
+                 output: AssociationOutputConfig | None = None, node: AssociationNodeConfig | None = None):
         self.tracker = MultiTargetTracker(config, kalman)
         self.output = output or AssociationOutputConfig()
+        self.node = node or AssociationNodeConfig()
         self.invalid_detections = 0
         self.resets = 0
         self.inputs = {"detections": "sensor_msgs/msg/PointCloud2"}
@@ -104,13 +118,16 @@ class AssociationProcessor(MessageProcessor):
         if topic == "image":
             return self._image(msg)
         stamp = stamp_to_ns(msg.header.stamp)
-        rows = cloud_to_table(msg, DETECTION_DTYPE)
+        rows = best_rows(cloud_to_table(msg, DETECTION_DTYPE), self.node.max_detections, self.report_rejection,
+                         "detections")
         boxes = np.stack([rows["x"], rows["y"], rows["w"], rows["h"]], axis=1).astype(np.float64)
         result = self.tracker.step(stamp * 1e-9, boxes, rows["score"], rows["class_id"])
         if result.rejected:
             self.invalid_detections += result.rejected
             self.report_rejection(f"detections: {result.rejected} invalid rows (NaN, inf or size <= 0) dropped")
-        self.resets += int(result.reset)
+        if result.reset:
+            self.resets += 1
+            self.report_event("detections: stamp jumped; the tracks were reset (new ids keep counting up)")
         shown = result.tracks.visible(self.output.include_tentative, self.output.include_coasting)
         self._shown = len(shown)
         table = tracks_to_table(shown)
@@ -134,6 +151,10 @@ class AssociationProcessor(MessageProcessor):
         return trails
 
     def _image(self, msg):
+        from aircraft_docking_tracker.images import is_compressed  # noqa: PLC0415
+
+        if not is_compressed(msg) and int(msg.width) * int(msg.height) > self.node.max_image_pixels:
+            raise Rejected(f"image {msg.width}x{msg.height} exceeds max_image_pixels={self.node.max_image_pixels}")
         stamp = stamp_to_ns(msg.header.stamp)
         if stamp in self._tables:
             return self._publish_image(msg, self._tables.pop(stamp))
@@ -152,11 +173,10 @@ class AssociationProcessor(MessageProcessor):
         while len(buffer) > _IMAGE_BUFFER:
             buffer.popitem(last=False)
 
-    @staticmethod
-    def _publish_image(image_msg, table):
+    def _publish_image(self, image_msg, table):
         from aircraft_docking_tracker.images import numpy_to_image, to_bgr8  # noqa: PLC0415
 
-        drawn = draw_tracks(to_bgr8(image_msg), table)
+        drawn = draw_tracks(to_bgr8(image_msg, self.node.max_image_pixels), table)
         return [("tracks/image", numpy_to_image(drawn, "bgr8", image_msg.header))]
 
     def reset(self) -> None:
@@ -173,12 +193,12 @@ class AssociationProcessor(MessageProcessor):
 
 
 def build(configs: dict) -> AssociationProcessor:
-    return AssociationProcessor(configs[""], configs[KALMAN_PREFIX], configs[OUTPUT_PREFIX])
+    return AssociationProcessor(configs[""], configs[KALMAN_PREFIX], configs[OUTPUT_PREFIX], configs[NODE_PREFIX])
 
 
 #: How the live node and ``run_offline`` build the same processor from config/association.yaml.
 SPEC = ProcessorSpec(NODE_NAME, {"": AssociationConfig, KALMAN_PREFIX: KalmanConfig,
-                                 OUTPUT_PREFIX: AssociationOutputConfig}, build)
+                                 OUTPUT_PREFIX: AssociationOutputConfig, NODE_PREFIX: AssociationNodeConfig}, build)
 
 
 class AssociationNode(PerceptionNode):
@@ -191,12 +211,14 @@ class AssociationNode(PerceptionNode):
             self.processor.tracker.configure(config=cfg)
         elif isinstance(cfg, KalmanConfig):
             self.processor.tracker.configure(kalman=cfg)
+        elif isinstance(cfg, AssociationNodeConfig):
+            self.processor.node = cfg
         else:   # output settings: trail length and track selection apply at once, topics at restart
             self.processor.output = cfg
 
 
 def main(args=None):
-    run_node(AssociationNode, args)
+    return run_node(AssociationNode, args)
 
 
 if __name__ == "__main__":

@@ -34,6 +34,13 @@ from multi_target_tracker.features import FEATURE_SETS, FUSED_DIM, feature_range
 
 MODEL_FORMAT = "aircraft_docking_tracker/boosted-cascade"
 MODEL_VERSION = 1
+#: Largest |stump leaf| or |stage threshold| a model may hold (trained values are below 100).
+MAX_STAGE_VALUE = 1e6
+#: Model sanity defaults (``DetectorConfig.max_model_stumps`` / ``min_model_window`` override them):
+#: the shipped models have 280-1200 stumps and windows of 14-64 px.
+MAX_STUMPS = 20000
+MIN_WINDOW = 8
+MAX_WINDOW = 4096
 
 
 class CascadeError(ValueError):
@@ -78,14 +85,26 @@ class Stage:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Stage":
-        stage = cls(np.asarray(d["features"], np.int64), np.asarray(d["thresholds"], np.int64),
-                    np.asarray(d["left"], np.float64), np.asarray(d["right"], np.float64), float(d["threshold"]))
-        n = len(stage.features)
-        if not (len(stage.thresholds) == len(stage.left) == len(stage.right) == n) or n == 0:
+        """A stage from its JSON form; refuses what the window loop cannot run on: non-integer or
+        out-of-range stump thresholds (features are 0..255), non-finite or absurd sums (|v| > 1e6)."""
+        try:
+            arrays = [np.asarray(d[k], np.float64).reshape(-1) for k in ("features", "thresholds", "left", "right")]
+            threshold = float(d["threshold"])
+        except (OverflowError, ValueError, TypeError) as exc:
+            raise CascadeError(f"a stage holds something that is not a list of numbers ({exc})") from None
+        n = len(arrays[0])
+        if not all(len(a) == n for a in arrays) or n == 0:
             raise CascadeError("a stage needs equally many features, thresholds, left and right values")
-        if stage.features.min() < 0 or stage.features.max() >= FUSED_DIM:
+        if not all(np.isfinite(a).all() for a in arrays) or not math.isfinite(threshold):
+            raise CascadeError("a stage holds a value that is not a finite number")
+        features, thresholds, left, right = arrays
+        if (features != np.round(features)).any() or features.min() < 0 or features.max() >= FUSED_DIM:
             raise CascadeError(f"feature index outside 0..{FUSED_DIM - 1}")
-        return stage
+        if (thresholds != np.round(thresholds)).any() or thresholds.min() < 0 or thresholds.max() > 256:
+            raise CascadeError("a stump threshold outside 0..256 (features are 0..255)")
+        if max(np.abs(left).max(), np.abs(right).max(), abs(threshold)) > MAX_STAGE_VALUE:
+            raise CascadeError(f"a stump value or stage threshold beyond +-{MAX_STAGE_VALUE:g}")
+        return cls(features.astype(np.int64), thresholds.astype(np.int64), left, right, threshold)
 
 
 @dataclass(frozen=True)
@@ -173,33 +192,48 @@ class Cascade:
         Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":")))
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Cascade":
+    def from_dict(cls, d: dict, max_stumps: int = MAX_STUMPS, min_window: int = MIN_WINDOW) -> "Cascade":
+        """A cascade from its JSON form, refusing models that would run unbounded: more than
+        ``max_stumps`` stumps, a window side below ``min_window`` or above ``MAX_WINDOW`` px."""
         if not isinstance(d, dict) or d.get("format") != MODEL_FORMAT:
             raise CascadeError(f"not a {MODEL_FORMAT} model")
         if d.get("version") != MODEL_VERSION:
             raise CascadeError(f"model version {d.get('version')} unsupported (expected {MODEL_VERSION})")
-        window = tuple(int(v) for v in d["window"])
-        if len(window) != 2 or min(window) < 4:
-            raise CascadeError(f"bad window size {window}")
+        try:
+            window = tuple(int(v) for v in d["window"])
+            edge_threshold = float(d["edge_threshold"])
+        except (OverflowError, ValueError) as exc:
+            raise CascadeError(f"bad window size or edge threshold ({exc})") from None
+        if len(window) != 2 or min(window) < max(4, min_window) or max(window) > MAX_WINDOW:
+            raise CascadeError(f"bad window size {window} (sides must be {max(4, min_window)}..{MAX_WINDOW} px)")
+        if not math.isfinite(edge_threshold):
+            raise CascadeError("edge_threshold is not a finite number")
         if d["feature_set"] not in FEATURE_SETS:
             raise CascadeError(f"unknown feature set {d['feature_set']!r}")
+        if not isinstance(d["stages"], list):
+            raise CascadeError("stages must be a list")
+        n_stumps = sum(len(s.get("features", ())) if isinstance(s, dict) else 0 for s in d["stages"])
+        if n_stumps > max_stumps:
+            raise CascadeError(f"model has {n_stumps} stumps, more than max_model_stumps={max_stumps}")
         stages = [Stage.from_dict(s) for s in d["stages"]]
         allowed = set(feature_range(d["feature_set"]).tolist())
         if any(int(f) not in allowed for s in stages for f in s.features):
             raise CascadeError(f"a stump uses a feature outside the {d['feature_set']} set")
-        return cls(window, d["feature_set"], float(d["edge_threshold"]), stages, bool(d.get("rotate90", False)),
+        return cls(window, d["feature_set"], edge_threshold, stages, bool(d.get("rotate90", False)),
                    dict(d.get("info", {})))
 
     @classmethod
-    def load(cls, path: str | Path) -> "Cascade":
+    def load(cls, path: str | Path, max_stumps: int = MAX_STUMPS, min_window: int = MIN_WINDOW) -> "Cascade":
         try:
             data = json.loads(Path(path).read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
             raise CascadeError(f"cannot read cascade model {path}: {exc}") from exc
         try:
-            return cls.from_dict(data)
-        except (KeyError, TypeError) as exc:
-            raise CascadeError(f"{path}: malformed cascade model ({exc})") from exc
+            return cls.from_dict(data, max_stumps, min_window)
+        except CascadeError as exc:
+            raise CascadeError(f"{path}: {exc}") from None
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise CascadeError(f"{path}: malformed cascade model ({type(exc).__name__}: {exc})") from exc
 
 
 # --------------------------------------------------------------------------- training

@@ -24,8 +24,7 @@ import numpy as np
 
 from aircraft_docking_tracker.bag import check_outputs
 from aircraft_docking_tracker.cli import AtomicFile
-from aircraft_docking_tracker.config import (ConfigError, add_config_arguments, config_from_arguments,
-                                             load_yaml_parameters, package_config_dir)
+from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from multi_target_tracker.detector import Detector, DetectorConfig
 from multi_target_tracker.detector_node import NODE_NAME
 from multi_target_tracker.train_cascade import IMAGE_SUFFIXES
@@ -95,8 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    path = Path(args.params_file) if args.params_file else package_config_dir() / "detector.yaml"
-    base = load_yaml_parameters(path, NODE_NAME) if path.is_file() else {}
+    base = tool_parameters(args.params_file, "detector.yaml", NODE_NAME)
     config = config_from_arguments(DetectorConfig, args, base={k: v for k, v in base.items() if "." not in k})
     detector = Detector(config)
     source = Path(args.input)

@@ -36,10 +36,10 @@ import cv2
 import numpy as np
 from scipy.special import expit
 
-from aircraft_docking_tracker.config import param
+from aircraft_docking_tracker.config import ConfigError, param
 from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
-from multi_target_tracker.cascade import Cascade, CascadeError
+from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -78,16 +78,72 @@ class DetectorConfig:
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
     threads: int = param(1, "pyramid levels scanned at once (the compiled loops release the GIL; 1: one core)",
                          low=1, high=16)
+    max_model_stumps: int = param(MAX_STUMPS, "refuse a cascade model with more stumps than this (bounds the "
+                                  "work per window)", low=1, high=10000000)
+    min_model_window: int = param(MIN_WINDOW, "refuse a model whose window is smaller than this [px] (bounds "
+                                  "the windows per frame)", low=4, high=1024)
+
+    def validate(self) -> None:
+        """Cross-field rules ``config.validate`` calls, at start-up and on every ``ros2 param set``:
+        a well-formed roi, ``min_size <= max_size``, and a model that exists and loads with the
+        chosen backend within the model limits (so a bad model is refused, not run)."""
+        roi = list(self.roi)
+        if len(roi) != 4 or any(v != int(v) for v in roi) or roi[2] < 0 or roi[3] < 0:
+            raise ConfigError(f"roi must be 4 whole numbers x, y, w, h with w, h >= 0, got {roi}", ("roi",))
+        if self.min_size > 0 and self.max_size > 0 and self.min_size > self.max_size:
+            raise ConfigError(f"min_size={self.min_size} must not exceed max_size={self.max_size}",
+                              ("min_size", "max_size"))
+        try:
+            load_model(self)
+        except (DetectorError, CascadeError) as exc:
+            raise ConfigError(f"model {self.model!r} ({self.backend} backend): {exc}",
+                              ("model", "backend", "max_model_stumps", "min_model_window")) from None
 
 
 def resolve_model(name: str) -> Path:
     """A model path, or a bare file name inside the package's ``models`` folder."""
-    path = Path(name).expanduser()
-    if not path.is_file() and (MODELS_DIR / name).is_file():
-        path = MODELS_DIR / name
-    if not path.is_file():
+    try:
+        path = Path(name).expanduser()
+        if not path.is_file() and (MODELS_DIR / name).is_file():
+            path = MODELS_DIR / name
+        found = path.is_file()
+    except (OSError, ValueError, RuntimeError) as exc:   # a NUL byte, a name too long, an unknown ~user
+        raise DetectorError(f"model file {name!r}: {exc}") from None
+    if not found:
         raise DetectorError(f"model file {name!r} not found (nor in {MODELS_DIR})")
     return path
+
+
+_MODEL_CACHE: dict = {}
+
+
+def load_model(cfg: DetectorConfig):
+    """The model of ``cfg`` loaded with its backend (a :class:`Cascade` or an ``OpenCVCascade``).
+
+    JSON cascades are cached by path, size and modification time (validation and the detector
+    built after it load the file once); any failure is a :class:`DetectorError` with the reason.
+    """
+    path = resolve_model(cfg.model)
+    if cfg.backend == "opencv":
+        from multi_target_tracker.opencv_backend import OpenCVCascade, OpenCVCascadeError  # noqa: PLC0415
+
+        if path.suffix.lower() == ".json":
+            raise DetectorError(f"{path.name} is a JSON cascade; the opencv backend needs a cv2 cascade XML")
+        try:
+            return OpenCVCascade(path)
+        except (OpenCVCascadeError, ValueError, cv2.error) as exc:
+            raise DetectorError(str(exc)) from None
+    stat = path.stat()
+    key = (str(path), stat.st_size, stat.st_mtime_ns, cfg.max_model_stumps, cfg.min_model_window)
+    if key not in _MODEL_CACHE:
+        try:
+            cascade = Cascade.load(path, cfg.max_model_stumps, cfg.min_model_window)
+        except CascadeError as exc:
+            raise DetectorError(str(exc)) from None
+        while len(_MODEL_CACHE) >= 4:
+            _MODEL_CACHE.pop(next(iter(_MODEL_CACHE)))
+        _MODEL_CACHE[key] = cascade
+    return _MODEL_CACHE[key]
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -227,19 +283,10 @@ class Detector:
         cfg = self.config
         if len(cfg.roi) != 4:
             raise DetectorError(f"roi needs 4 numbers x, y, w, h, got {cfg.roi}")
-        path = resolve_model(cfg.model)
-        self.cascade = self.opencv = None
-        if cfg.backend == "cascade":
-            try:
-                self.cascade = Cascade.load(path)
-            except CascadeError as exc:
-                raise DetectorError(str(exc)) from exc
-            self.window = self.cascade.window
-        else:
-            from multi_target_tracker.opencv_backend import OpenCVCascade  # noqa: PLC0415
-
-            self.opencv = OpenCVCascade(path)
-            self.window = self.opencv.window
+        model = load_model(cfg)
+        self.cascade = model if isinstance(model, Cascade) else None
+        self.opencv = None if isinstance(model, Cascade) else model
+        self.window = model.window
         info = self.cascade.info if self.cascade is not None else {}
         self.min_size = cfg.min_size or float(info.get("search_min_size", 0.0))
         self.max_size = cfg.max_size or float(info.get("search_max_size", 0.0))

@@ -24,10 +24,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from aircraft_docking_tracker.config import param
+from aircraft_docking_tracker.images import MAX_PIXELS
 from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import table_to_cloud
-from aircraft_docking_tracker.processing import MessageProcessor, ProcessorSpec, Rejected
+from aircraft_docking_tracker.processing import ERROR, MessageProcessor, ProcessorSpec, Rejected
 from multi_target_tracker.detector import Detector, DetectorConfig
 
 NODE_NAME = "detector"
@@ -38,9 +39,13 @@ NODE_PREFIX = "node."
 class DetectorNodeConfig:
     """Message handling around the detector core (topics are fixed at start-up)."""
 
-    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image")
+    compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image (start-up only)",
+                             read_only=True)
     frame_stride: int = param(1, "detect on every k-th received frame (others are passed over)", low=1, high=1000)
-    annotate_image: bool = param(False, "publish detections/image (bgr8 with the boxes drawn)")
+    annotate_image: bool = param(False, "publish detections/image (bgr8 with the boxes drawn; start-up only)",
+                                 read_only=True)
+    max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) frames of more pixels than this; a compressed "
+                                  "frame's size is read from its header before decoding", low=1, high=400000000)
 
 
 def draw_detections(bgr: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -76,11 +81,13 @@ class DetectorProcessor(MessageProcessor):
         self.configure(config or DetectorConfig())
 
     def configure(self, config: DetectorConfig) -> None:
-        """(Re)load the model; on failure every frame is rejected with the reason until fixed."""
+        """(Re)load the model; on failure every frame is rejected with the reason until fixed (the
+        node's parameter validation refuses such a model first; this covers a file gone since)."""
         try:
             self.detector, self.model_error = Detector(config), ""
-        except ValueError as exc:
-            self.detector, self.model_error = None, str(exc)
+        except Exception as exc:  # noqa: BLE001 - a model that cannot run disables detection, not the node
+            self.detector, self.model_error = None, f"{type(exc).__name__}: {exc}" if not isinstance(
+                exc, ValueError) else str(exc)
 
     def process(self, topic, msg):
         from aircraft_docking_tracker.images import numpy_to_image, to_bgr8, to_mono8  # noqa: PLC0415
@@ -91,8 +98,9 @@ class DetectorProcessor(MessageProcessor):
         if (self.frames - 1) % self.node.frame_stride:
             self.passed_over += 1
             return []
-        bgr = to_bgr8(msg) if self.node.annotate_image else None
-        gray = to_mono8(msg) if bgr is None else _gray(bgr)
+        limit = self.node.max_image_pixels
+        bgr = to_bgr8(msg, limit) if self.node.annotate_image else None
+        gray = to_mono8(msg, limit) if bgr is None else _gray(bgr)
         table = self.detector.detect(gray)
         self.last_count = len(table)
         out = [("detections", table_to_cloud(table, msg.header)),
@@ -109,6 +117,11 @@ class DetectorProcessor(MessageProcessor):
         return {"detections last frame": self.last_count, "frames passed over (stride)": self.passed_over,
                 "model": "" if self.detector is None else self.detector.config.model,
                 "model error": self.model_error}
+
+    def health(self):
+        if self.detector is None:
+            return ERROR, f"detector disabled, no model: {self.model_error}"
+        return None
 
 
 def _gray(bgr: np.ndarray) -> np.ndarray:
@@ -141,7 +154,7 @@ class DetectorNode(PerceptionNode):
 
 
 def main(args=None):
-    run_node(DetectorNode, args)
+    return run_node(DetectorNode, args)
 
 
 if __name__ == "__main__":

@@ -52,7 +52,8 @@ class KalmanConfig:
 
     def validate(self) -> None:
         if self.measurement_noise <= 0 and self.measurement_noise_per_px <= 0:
-            raise ConfigError("measurement_noise and measurement_noise_per_px cannot both be 0")
+            raise ConfigError("measurement_noise and measurement_noise_per_px cannot both be 0",
+                              ("measurement_noise", "measurement_noise_per_px"))
 
 
 def transition(T: float) -> np.ndarray:

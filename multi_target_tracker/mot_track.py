@@ -23,8 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from aircraft_docking_tracker.bag import BagError, check_outputs
-from aircraft_docking_tracker.config import (add_config_arguments, config_from_arguments, load_yaml_parameters,
-                                             package_config_dir)
+from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from multi_target_tracker import motchallenge as mc
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker
 from multi_target_tracker.kalman import KalmanConfig
@@ -75,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-coasting", action="store_true", help="do not write tracks coasting on prediction")
     parser.add_argument("--backfill", action="store_true", help="write a confirmed track's tentative frames too")
     parser.add_argument("--json", action="store_true", help="print the metrics (and per-target continuity) as JSON")
+    parser.add_argument("--max-frame", type=int, default=mc.MAX_FRAME,
+                        help=f"refuse files with frame numbers above this (default {mc.MAX_FRAME}; every frame up to "
+                        "the last is tracked)")
     add_config_arguments(parser, AssociationConfig)
     add_config_arguments(parser, KalmanConfig, prefix="kalman_")
     return parser
@@ -82,8 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def configs_from(args) -> tuple[AssociationConfig, KalmanConfig]:
     """Association and Kalman configs: YAML file, then the command-line options on top."""
-    params = args.params or package_config_dir() / "association.yaml"
-    base = load_yaml_parameters(params, NODE_NAME) if Path(params).is_file() else {}
+    base = tool_parameters(args.params, "association.yaml", NODE_NAME)
     kalman_base = {k[len(KALMAN_PREFIX):]: v for k, v in base.items() if k.startswith(KALMAN_PREFIX)}
     assoc = config_from_arguments(AssociationConfig, args, base=base)
     kalman = config_from_arguments(KalmanConfig, args, prefix="kalman_", base=kalman_base)
@@ -100,14 +101,22 @@ def main(argv=None) -> int:
     except BagError as exc:
         print(f"mot_track: {exc}", file=sys.stderr)
         return 2
-    info = mc.read_seqinfo(args.seqinfo or args.det.parent)
-    fps = args.fps or info.get("frameRate") or 30.0
-    assoc, kalman = configs_from(args)
-    detections = mc.read_detections(args.det)
-    last = info.get("seqLength") or (int(detections["frame"].max()) if len(detections) else 0)
-    if args.gt:
-        gt = mc.read_ground_truth(args.gt)
-        last = max(last, int(gt["frame"].max()) if len(gt) else 0)
+    try:
+        info = mc.read_seqinfo(args.seqinfo or args.det.parent)
+        fps = args.fps or info.get("frameRate") or 30.0
+        assoc, kalman = configs_from(args)
+        detections = mc.read_detections(args.det, max_frame=args.max_frame)
+        last = info.get("seqLength") or (int(detections["frame"].max()) if len(detections) else 0)
+        if args.gt:
+            gt = mc.read_ground_truth(args.gt, max_frame=args.max_frame)
+            last = max(last, int(gt["frame"].max()) if len(gt) else 0)
+        if not 0 <= last <= args.max_frame:
+            raise mc.MotFormatError(f"sequence length {last} is beyond --max-frame {args.max_frame}")
+        if not fps > 0 or not np.isfinite(fps):
+            raise ValueError(f"frame rate {fps} must be a positive number")
+    except (mc.MotFormatError, ConfigError, ValueError, OSError) as exc:
+        print(f"mot_track: {exc}", file=sys.stderr)
+        return 2
     rows, rejected = track_sequence(detections, fps, MultiTargetTracker(assoc, kalman), last,
                                     args.include_tentative, not args.no_coasting, args.backfill, progress=True)
     if rejected:

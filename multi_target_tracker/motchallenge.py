@@ -27,18 +27,30 @@ MOT_ROW_DTYPE = np.dtype([
 
 
 class MotFormatError(ValueError):
-    """A MOTChallenge file that cannot be read (missing columns, non-numbers)."""
+    """A MOTChallenge file that cannot be read (missing columns, non-numbers, frames out of range)."""
 
 
-def read_mot(path: str | Path) -> np.ndarray:
+#: Largest frame number read by default: 1,000,000 frames are 9 h at 30 fps (MOTChallenge
+#: sequences have at most a few thousand). A tracker steps through every frame up to the last, so
+#: one row with frame 2,000,000,000 would otherwise mean two billion steps.
+MAX_FRAME = 1_000_000
+
+
+def read_mot(path: str | Path, max_frame: int = MAX_FRAME) -> np.ndarray:
     """Read a MOTChallenge ``det.txt`` / ``gt.txt`` / results file into ``MOT_ROW_DTYPE`` rows.
 
-    Commas or whitespace separate the columns; at least the first six are required.
+    Commas or whitespace separate the columns; at least the first six are required. Frame numbers
+    must be whole numbers from 0 to ``max_frame``, ids whole numbers (else MotFormatError with the line).
     Rows are returned sorted by frame (stable, so the file's order within a frame is kept).
     """
     path = Path(path)
     rows = []
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MotFormatError(f"{path}: cannot read ({exc})") from None
+    limit = 2**31 - 1
+    for number, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
@@ -52,26 +64,32 @@ def read_mot(path: str | Path) -> np.ndarray:
         values += [-1.0] * (9 - len(values))
         if len(fields) < 7:
             values[6] = 1.0
+        frame, ident, cls = values[0], values[1], values[7]
+        if not (np.isfinite(frame) and frame == int(frame) and 0 <= frame <= max_frame):
+            raise MotFormatError(f"{path}:{number}: frame {fields[0]} is not a whole number from 0 to {max_frame}")
+        for name, v in (("id", ident), ("class", cls)):
+            if not (np.isfinite(v) and v == int(v) and -limit <= v <= limit):
+                raise MotFormatError(f"{path}:{number}: {name} {v:g} is not a 32-bit whole number")
         rows.append((int(values[0]), int(values[1]), *values[2:7], int(values[7]), values[8]))
     table = np.array(rows, dtype=MOT_ROW_DTYPE)
     return table[np.argsort(table["frame"], kind="stable")]
 
 
-def read_detections(path: str | Path, min_score: float | None = None) -> np.ndarray:
+def read_detections(path: str | Path, min_score: float | None = None, max_frame: int = MAX_FRAME) -> np.ndarray:
     """``det.txt`` rows, keeping only those with ``score >= min_score`` when it is given."""
-    rows = read_mot(path)
+    rows = read_mot(path, max_frame)
     if min_score is not None:
         rows = rows[rows["score"] >= min_score]
     return rows
 
 
-def read_ground_truth(path: str | Path, classes: Iterable[int] | None = None) -> np.ndarray:
+def read_ground_truth(path: str | Path, classes: Iterable[int] | None = None, max_frame: int = MAX_FRAME) -> np.ndarray:
     """``gt.txt`` rows that count in evaluation: ``conf`` flag not 0, and class in ``classes``.
 
     MOT15 files (TUD-Campus) have flag 1 and class -1 throughout, so everything is kept; MOT16+
     files mark distractors with flag 0. ``classes=None`` keeps every class.
     """
-    rows = read_mot(path)
+    rows = read_mot(path, max_frame)
     rows = rows[rows["score"] != 0]
     if classes is not None:
         rows = rows[np.isin(rows["cls"], list(classes)) | (rows["cls"] == -1)]
@@ -93,9 +111,12 @@ def frames(rows: np.ndarray, first: int | None = None, last: int | None = None) 
     first = 1 if first is None else int(first)
     if last is None:
         last = int(rows["frame"].max()) if len(rows) else first - 1
-    starts = np.searchsorted(rows["frame"], np.arange(first, last + 2))
-    for k, frame in enumerate(range(first, last + 1)):
-        yield frame, rows[starts[k]:starts[k + 1]]
+    frame_numbers = rows["frame"]
+    start = int(np.searchsorted(frame_numbers, first))
+    for frame in range(first, last + 1):     # no per-frame table: memory does not grow with ``last``
+        end = int(np.searchsorted(frame_numbers, frame + 1, side="left"))
+        yield frame, rows[start:end]
+        start = end
 
 
 def read_seqinfo(path: str | Path) -> dict:
@@ -110,13 +131,19 @@ def read_seqinfo(path: str | Path) -> dict:
         return {}
     parser = configparser.ConfigParser()
     parser.optionxform = str
-    parser.read(path)
+    try:
+        parser.read(path)
+    except (configparser.Error, UnicodeDecodeError) as exc:
+        raise MotFormatError(f"{path}: not a seqinfo.ini ({str(exc).splitlines()[0]})") from None
     if "Sequence" not in parser:
         return {}
     info: dict = dict(parser["Sequence"])
     for key in ("frameRate", "seqLength", "imWidth", "imHeight"):
         if key in info:
-            info[key] = float(info[key]) if key == "frameRate" else int(info[key])
+            try:
+                info[key] = float(info[key]) if key == "frameRate" else int(info[key])
+            except ValueError:
+                raise MotFormatError(f"{path}: {key}={info[key]!r} is not a number") from None
     return info
 
 

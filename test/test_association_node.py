@@ -17,7 +17,7 @@ from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
 from aircraft_docking_tracker.processing import ProcessingStats, process_guarded
 from multi_target_tracker.association import AssociationConfig
-from multi_target_tracker.association_node import (AssociationNode, AssociationOutputConfig,
+from multi_target_tracker.association_node import (AssociationNode, AssociationNodeConfig, AssociationOutputConfig,
                                                    AssociationProcessor)
 from multi_target_tracker.kalman import KalmanConfig
 
@@ -44,7 +44,8 @@ def detections_msg(k: int, rows=None) -> PointCloud2:
 def test_yaml_lists_every_parameter_with_its_default():
     params = load_yaml_parameters(package_config_dir() / "association.yaml", "association")
     expected = {}
-    for prefix, cls in (("", AssociationConfig), ("kalman.", KalmanConfig), ("output.", AssociationOutputConfig)):
+    for prefix, cls in (("", AssociationConfig), ("kalman.", KalmanConfig), ("output.", AssociationOutputConfig),
+                        ("node.", AssociationNodeConfig)):
         expected.update({prefix + f.name: getattr(cls(), f.name) for f in dataclasses.fields(cls)})
     assert params == pytest.approx(expected)
 

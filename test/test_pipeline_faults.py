@@ -4,7 +4,7 @@ The rejection counter behind ``/diagnostics`` is keyed by the reason text. Reaso
 (byte counts, image sizes, row counts), so a camera sending truncated frames of varying length, or
 detections with a varying number of bad rows, adds one key per distinct number: the counter, and
 the node's memory, grow without bound over a long run, and the top-3 reasons in /diagnostics
-become one kind split many ways. ``processing._reason_key`` promises "counted by kind".
+become one kind split many ways. ``processing.reason_key`` promises "counted by kind".
 """
 from aircraft_docking_tracker.processing import MessageProcessor, ProcessingStats, process_guarded
 
