@@ -6,7 +6,9 @@
 Topics appear while it runs are picked up (discovery every ``--discovery-interval`` s). The
 subscription QoS adapts to the publishers, as ``ros2 bag record`` does: reliable only if every
 publisher is reliable, transient-local only if every one is. Log time is the receive time on the
-node's clock (``use_sim_time`` honoured), publish time the publisher's source timestamp. Ctrl-C or
+node's clock (``use_sim_time`` honoured), publish time the publisher's source timestamp. Messages
+that never arrived (a lossy link, a host cut off) are counted from the publisher's sequence numbers,
+on topics with one publisher, logged and summed up at the end ("missed"). Ctrl-C or
 SIGTERM finish the file properly; after a hard kill, the file holds everything up to the last
 chunk flushed (every ``--flush-interval`` s) and ``mcap_record --recover IN OUT`` repairs it.
 """
@@ -37,6 +39,11 @@ class Recorder:
         self.unknown_types: set[str] = set()
         self.errors = 0
         self._lock = threading.Lock()
+        # sequence gaps: messages the publisher sent that never arrived (topics with one publisher)
+        self.missed: dict[str, int] = {}
+        self.gaps: dict[str, int] = {}
+        self._last_sequence: dict[str, int] = {}
+        self._single_publisher: set[str] = set()
 
     def _absolute(self, topic: str) -> str:
         from rclpy.validate_full_topic_name import validate_full_topic_name  # noqa: PLC0415
@@ -55,6 +62,12 @@ class Recorder:
     def discover(self) -> None:
         """Subscribe to every wanted topic that has publishers and no subscription yet."""
         for topic, types in self.node.get_topic_names_and_types():
+            if topic in self.subscriptions:  # with several publishers, sequence numbers interleave
+                if self.node.count_publishers(topic) == 1:
+                    self._single_publisher.add(topic)
+                else:
+                    self._single_publisher.discard(topic)
+                    self._last_sequence.pop(topic, None)
             if topic in self.subscriptions or not self.wanted(topic) or not types:
                 continue
             type_name = types[0]
@@ -91,6 +104,8 @@ class Recorder:
         def on_message(data: bytes, info) -> None:
             receive_ns = clock.now().nanoseconds
             source_ns = info.get("source_timestamp") if isinstance(info, dict) else None
+            if isinstance(info, dict) and topic in self._single_publisher:
+                self._count_gap(topic, info.get("publication_sequence_number"))
             try:
                 self.writer.write_serialized(topic, type_name, data, receive_ns, source_ns or receive_ns)
             except Exception as exc:  # a full disk must not kill the node: count and say so
@@ -98,6 +113,22 @@ class Recorder:
                     self.errors += 1
                 self.node.get_logger().error(f"write failed on {topic}: {exc}", throttle_duration_sec=5.0)
         return on_message
+
+
+    def _count_gap(self, topic: str, sequence: int | None) -> None:
+        if not sequence:  # 0 or None: the middleware does not number messages
+            return
+        last = self._last_sequence.get(topic)
+        self._last_sequence[topic] = sequence
+        if last is None or sequence <= last:  # the first one, or a restarted publisher numbering anew
+            return
+        missed = sequence - last - 1
+        if missed > 0:
+            with self._lock:
+                self.missed[topic] = self.missed.get(topic, 0) + missed
+                self.gaps[topic] = self.gaps.get(topic, 0) + 1
+            self.node.get_logger().warning(f"{topic}: {missed} messages missed (sequence {last} -> {sequence}); "
+                                           f"{self.missed[topic]} in {self.gaps[topic]} gaps so far")
 
 
 def default_output_name() -> str:
@@ -173,7 +204,8 @@ def main(args: list[str] | None = None) -> int:
     print(f"mcap_record: wrote {writer.message_count} messages, {writer.bytes_written / 1e6:.2f} MB of payload, "
           f"to {output}")
     for topic, count in sorted(writer.topic_counts.items()):
-        print(f"  {topic}: {count}")
+        missed = recorder.missed.get(topic, 0)
+        print(f"  {topic}: {count}" + (f" ({missed} missed in {recorder.gaps[topic]} gaps)" if missed else ""))
     return 1 if recorder.errors else 0
 
 
