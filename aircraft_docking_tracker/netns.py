@@ -235,7 +235,7 @@ class VirtualNetwork:
         # per packet (IP fragment) on the wire, before reassembly: netdev ingress of eth0
         threshold = max(1, min(1_000_000, round(loss_pct * 10_000)))
         rules = (f"table netdev adt_loss {{ chain ingress {{ type filter hook ingress device \"eth0\" priority 0; "
-                 f"numgen random mod 1000000 < {threshold} counter drop; }} }}")
+                 f"numgen random mod 1000000 < {threshold} counter drop; }}; }}")
         result = subprocess.run(["ip", "netns", "exec", host.namespace, "nft", "-f", "-"], input=rules,
                                 capture_output=True, text=True, timeout=30)
         if result.returncode != 0:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker import netns
-from aircraft_docking_tracker.bag import BagReader
+from aircraft_docking_tracker.bag import BagReader, BagWriter, stamp_to_ns
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table
 from aircraft_docking_tracker.offline import build_processor, run
 from aircraft_docking_tracker.processes import NodeProcess, executable_path, wait_until
@@ -103,7 +103,7 @@ def _diagnostics(bag, node: str) -> list[tuple[int, dict]]:
 
 def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
     """Camera host plays, compute host runs detector -> association and the docking tracker, recording
-    host records: played slowly enough that no frame is skipped, the outputs equal run_offline's."""
+    host records: no frame is lost between hosts, and the outputs equal run_offline's frame for frame."""
     bag = docking_bag(tmp_path / "docking.mcap", frames=40)
     box = first_polygon_box(bag)
     recording = tmp_path / "rec"
@@ -127,22 +127,41 @@ def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
     # handled + replaced in the keep-newest slot = every frame that reached the compute host
     assert received + skipped == 40, (f"{40 - received - skipped} frames lost on the way to the detector",
                                       detector[-1])
+    docking = _diagnostics(recording, f"/{CAM}/docking_tracker")[-1][1]
+    polygons = len(_messages(recording, f"/{CAM}/docking/polygon"))
+    assert polygons + int(docking["skipped"]) == 40, ("frames lost on the way to the docking tracker", docking)
 
-    offline = tmp_path / "offline.mcap"
-    processors = {"docking_tracker": build_processor("docking_tracker", overrides={"initial_box": box}),
-                  "detector": build_processor("detector"), "association": build_processor("association")}
-    run(bag, offline, [], progress=False, processors=processors)
-    live_quads = [[(p.x, p.y) for p in m.polygon.points] for _, m in _messages(recording, f"/{CAM}/docking/polygon")]
-    offline_quads = [[(p.x, p.y) for p in m.polygon.points] for _, m in _messages(offline, "/docking/polygon")]
-    assert len(live_quads) == 40
-    np.testing.assert_array_equal(np.array(live_quads, float), np.array(offline_quads, float))
-    if skipped:
-        pytest.skip(f"the machine was too busy: the detector skipped {skipped} of 40 frames (tracks differ)")
-    live_tracks = [cloud_to_table(m, TRACK_DTYPE) for _, m in _messages(recording, f"/{CAM}/tracks")]
-    offline_tracks = [cloud_to_table(m, TRACK_DTYPE) for _, m in _messages(offline, "/tracks")]
-    assert len(live_tracks) == len(offline_tracks) == 40
-    for a, b in zip(live_tracks, offline_tracks):
-        np.testing.assert_array_equal(a, b)
+    # a node skips a frame when the next one arrives before it is done (a busy machine, the first
+    # frame's warm-up): run offline over exactly the frames each node handled, then compare one to one
+    def offline_outputs(live_topic, nodes, out_topic, **overrides):
+        handled = {stamp_to_ns(m.header.stamp) for _, m in _messages(recording, f"/{CAM}/{live_topic}")}
+        assert len(handled) >= 30, f"{live_topic}: only {len(handled)} of 40 frames handled"
+        subset = _frames(bag, tmp_path / f"{nodes[0]}_frames.mcap", handled)
+        processors = {n: build_processor(n, overrides=overrides if n == "docking_tracker" else None) for n in nodes}
+        run(subset, tmp_path / f"{nodes[0]}_offline.mcap", [], progress=False, processors=processors)
+        return _messages(tmp_path / f"{nodes[0]}_offline.mcap", f"/{out_topic}")
+
+    offline_quads = offline_outputs("docking/polygon", ["docking_tracker"], "docking/polygon", initial_box=box)
+    live_quads = _messages(recording, f"/{CAM}/docking/polygon")
+    assert len(live_quads) == len(offline_quads)
+    for (_, a), (_, b) in zip(live_quads, offline_quads):
+        assert a.header.stamp == b.header.stamp
+        np.testing.assert_array_equal([(p.x, p.y) for p in a.polygon.points], [(p.x, p.y) for p in b.polygon.points])
+    offline_tracks = offline_outputs("detections", ["detector", "association"], "tracks")
+    live_tracks = _messages(recording, f"/{CAM}/tracks")
+    assert len(live_tracks) == len(offline_tracks)
+    for (_, a), (_, b) in zip(live_tracks, offline_tracks):
+        assert a.header.stamp == b.header.stamp
+        np.testing.assert_array_equal(cloud_to_table(a, TRACK_DTYPE), cloud_to_table(b, TRACK_DTYPE))
+
+
+def _frames(bag, out, stamps_ns):
+    """A copy of ``bag``'s images whose header stamps are in ``stamps_ns``."""
+    with BagWriter(out) as writer:
+        for item in BagReader(bag).messages(topics=["image"]):
+            if stamp_to_ns(item.deserialize().header.stamp) in stamps_ns:
+                writer.write_serialized(item.topic, item.type_name, item.data, item.log_time_ns, item.publish_time_ns)
+    return out
 
 
 def test_camera_link_down_for_5_s_recovers_without_restarts(hosts, tmp_path):
@@ -199,7 +218,7 @@ def test_compute_host_packet_loss_then_restart(hosts, tmp_path):
     hosts.wait_recording("docking/state")
     player = hosts.play(bag, 0.7)  # ~10 Hz, 25 s
     assert wait_until(lambda: "recording /diagnostics " in hosts.log("record.log"), 30)
-    time.sleep(6.0)
+    time.sleep(9.0)  # the player waits for subscribers, 3 s more, then ~5 s of clean frames
     loss_from = time.time_ns()
     try:
         hosts.net.impair(hosts.compute, loss_pct=0.5)
@@ -225,12 +244,13 @@ def test_compute_host_packet_loss_then_restart(hosts, tmp_path):
     assert any(t > killed_ns + 1e9 for t in states), "no output after the compute node was restarted"
     if reason:
         pytest.skip(f"restart checked; packet loss not injected: {reason}")
-    # frames received per second, from the node's diagnostics (1 Hz) recorded on the recording host
-    diag = [(t, int(v["received"])) for t, v in _diagnostics(recording, f"/{CAM}/docking_tracker") if t < killed_ns]
-    per_s = [((t1 - t0) / 1e9, r1 - r0, t1) for (t0, r0), (t1, r1) in zip(diag, diag[1:])]
+    # frames reaching the node per second (handled + skipped), from its 1 Hz diagnostics as recorded
+    diag = [(t, int(v["received"]) + int(v["skipped"]))
+            for t, v in _diagnostics(recording, f"/{CAM}/docking_tracker") if t < killed_ns]
+    per_s = [((t1 - t0) / 1e9, r1 - r0, t1) for (t0, r0), (t1, r1) in zip(diag, diag[1:]) if r0 > 0]
     clean = [n / dt for dt, n, t in per_s if t < loss_from]
     lossy = [n / dt for dt, n, t in per_s if loss_from + 1.5e9 < t <= loss_to]
-    assert len(clean) >= 3 and len(lossy) >= 2, per_s
+    assert len(clean) >= 2 and len(lossy) >= 2, per_s
     # ~650 packets per 640x480 image: at 0.5 % loss nearly every image loses a fragment, and a
     # best-effort subscriber drops the whole image
     assert np.median(lossy) < 0.5 * np.median(clean), (clean, lossy)
