@@ -140,7 +140,7 @@ class Host:
 class VirtualNetwork:
     """Hosts (network namespaces) on one emulated Ethernet segment, removed again on :meth:`close`."""
 
-    def __init__(self, subnet: int | None = None):
+    def __init__(self, subnet: int | None = None, multicast: bool = True):
         reason = unavailable_reason()
         if reason:
             raise NetworkUnavailable(reason)
@@ -148,6 +148,7 @@ class VirtualNetwork:
         self.tag = f"{NAME_PREFIX}-{os.getpid()}-{next(_counter)}"
         # 10.231.<subnet>.0/24: a different subnet per network object, so parallel networks never meet
         self.subnet = subnet if subnet is not None else (os.getpid() * 7 + next(_counter)) % 250 + 1
+        self.multicast = multicast  # False: a network without multicast (discovery needs peers)
         self.hosts: dict[str, Host] = {}
         self._namespaces: list[str] = []
         self._closed = False
@@ -180,8 +181,10 @@ class VirtualNetwork:
         address = f"10.231.{self.subnet}.{index}"
         _ip("-n", ns, "addr", "add", f"{address}/24", "dev", "eth0")
         _ip("-n", ns, "link", "set", "eth0", "up")
-        # DDS discovery multicast (239.255.0.1) leaves through eth0: the host has no other route
-        _ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "eth0")
+        if self.multicast:  # DDS discovery multicast (239.255.0.1) leaves through eth0, the only route
+            _ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "eth0")
+        else:
+            _ip("-n", ns, "link", "set", "eth0", "multicast", "off")
         shm = self._workdir / f"shm-{name}"
         shm.mkdir(mode=0o1777)
         host = Host(name, ns, address, shm, port)
