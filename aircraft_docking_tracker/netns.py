@@ -148,7 +148,7 @@ class VirtualNetwork:
         self.tag = f"{NAME_PREFIX}-{os.getpid()}-{next(_counter)}"
         # 10.231.<subnet>.0/24: a different subnet per network object, so parallel networks never meet
         self.subnet = subnet if subnet is not None else (os.getpid() * 7 + next(_counter)) % 250 + 1
-        self.multicast = multicast  # False: a network without multicast (discovery needs peers)
+        self.multicast = multicast  # False: the switch drops multicast (discovery needs peers)
         self.hosts: dict[str, Host] = {}
         self._namespaces: list[str] = []
         self._closed = False
@@ -158,11 +158,24 @@ class VirtualNetwork:
             self.switch = self._add_namespace("sw")
             _ip("-n", self.switch, "link", "add", "br0", "type", "bridge")
             _ip("-n", self.switch, "link", "set", "br0", "up")
+            if not multicast:
+                self._block_multicast()
         except Exception:
             self.close()
             raise
 
     # ------------------------------------------------------------------ building
+    def _block_multicast(self) -> None:
+        """The switch forwards no IPv4 multicast between hosts (an nftables bridge rule)."""
+        if shutil.which("nft") is None:
+            raise NetworkUnavailable("a network without multicast needs nftables (apt-get install nftables)")
+        rules = ("table bridge adt_no_multicast { chain forward { type filter hook forward priority 0; "
+                 "ip daddr 224.0.0.0/4 drop; }; }")
+        result = subprocess.run(["ip", "netns", "exec", self.switch, "nft", "-f", "-"], input=rules,
+                                capture_output=True, text=True, timeout=30)
+        if result.returncode != 0:
+            raise NetworkUnavailable(f"cannot block multicast on the switch: {result.stderr.strip()}")
+
     def _add_namespace(self, suffix: str) -> str:
         ns = f"{self.tag}-{suffix}"
         _ip("netns", "add", ns)
@@ -181,10 +194,9 @@ class VirtualNetwork:
         address = f"10.231.{self.subnet}.{index}"
         _ip("-n", ns, "addr", "add", f"{address}/24", "dev", "eth0")
         _ip("-n", ns, "link", "set", "eth0", "up")
-        if self.multicast:  # DDS discovery multicast (239.255.0.1) leaves through eth0, the only route
-            _ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "eth0")
-        else:
-            _ip("-n", ns, "link", "set", "eth0", "multicast", "off")
+        # DDS discovery multicast (239.255.0.1) leaves through eth0, the only route (without
+        # multicast, the switch drops it)
+        _ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "eth0")
         shm = self._workdir / f"shm-{name}"
         shm.mkdir(mode=0o1777)
         host = Host(name, ns, address, shm, port)

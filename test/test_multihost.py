@@ -6,7 +6,10 @@ processes are the installed executables started as `ros2 run` would (processes.N
 root and iproute2 (`apt-get install iproute2`); packet loss needs `tc netem` or nftables
 (`apt-get install nftables`). Skipped, with the reason, where the namespaces cannot be made.
 """
+import os
+import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -47,9 +50,11 @@ class Hosts:
         self.net, self.folder = net, folder
         self.camera, self.compute, self.recorder = net.add_host("camera"), net.add_host("compute"), net.add_host("recorder")
         self.processes: list[NodeProcess] = []
+        self.net_env = net.ros_env()
+        self.cleanups: list[subprocess.Popen] = []  # helper processes that are not ROS executables
 
     def start(self, host: netns.Host, executable: str, log: str, **kwargs) -> NodeProcess:
-        process = NodeProcess(executable, prefix=host.prefix, env=self.net.ros_env(), log_path=self.folder / log,
+        process = NodeProcess(executable, prefix=host.prefix, env=self.net_env, log_path=self.folder / log,
                               **kwargs).start()
         self.processes.append(process)
         return process
@@ -57,13 +62,13 @@ class Hosts:
     def log(self, name: str) -> str:
         return (self.folder / name).read_text()
 
-    def record(self, topics: list[str], out) -> NodeProcess:
-        return self.start(self.recorder, "mcap_record", "record.log", args=[*topics, "-o", out])
+    def record(self, topics: list[str], out, log: str = "record.log") -> NodeProcess:
+        return self.start(self.recorder, "mcap_record", log, args=[*topics, "-o", out])
 
-    def play(self, bag, rate: float, **extra) -> NodeProcess:
+    def play(self, bag, rate: float, wait_s: float = 30) -> NodeProcess:
         return self.start(self.camera, "mcap_play", "play.log",
                           args=[bag, "--topics", "image", "--remap", f"image:=/{CAM}/image", "--rate", rate,
-                                "--wait-for-subscribers", 30, "--delay", 3, *extra])
+                                "--wait-for-subscribers", wait_s, "--delay", 3])
 
     def docking_tracker(self, box, log: str = "docking.log") -> NodeProcess:
         return self.start(self.compute, "docking_tracker_node", log, namespace=CAM, parameters={"initial_box": box})
@@ -75,6 +80,10 @@ class Hosts:
     def stop_all(self) -> None:
         for process in reversed(self.processes):
             process.stop()
+        for helper in self.cleanups:
+            if helper.poll() is None:
+                helper.terminate()
+                helper.wait(10)
 
 
 @pytest.fixture
@@ -254,3 +263,47 @@ def test_compute_host_packet_loss_then_restart(hosts, tmp_path):
     # ~650 packets per 640x480 image: at 0.5 % loss nearly every image loses a fragment, and a
     # best-effort subscriber drops the whole image
     assert np.median(lossy) < 0.5 * np.median(clean), (clean, lossy)
+
+
+def test_network_without_multicast_works_with_static_peers_or_a_discovery_server(tmp_path):
+    """The switch drops multicast: automatic discovery finds nothing between hosts; ROS_STATIC_PEERS
+    (unicast discovery to the listed hosts) or a Fast DDS discovery server on the recording host
+    (ROS_DISCOVERY_SERVER) connect the camera host and the recording host."""
+    reason = netns.unavailable_reason()
+    if reason:
+        pytest.skip(f"multi-host tests need network namespaces: {reason}")
+    try:
+        net = netns.VirtualNetwork(multicast=False)
+    except netns.NetworkUnavailable as exc:
+        pytest.skip(str(exc))
+    bag = docking_bag(tmp_path / "docking.mcap", frames=20)
+    with net:
+        hosts = Hosts(net, tmp_path)
+        server = f"{hosts.recorder.address}:11811"
+        rounds = {"no_peers": net.ros_env(), "peers": net.ros_env(peers=[hosts.camera, hosts.recorder]),
+                  # the recorder finds topics in the graph: with a server it must see all of it (super client)
+                  "server": dict(net.ros_env(), ROS_DISCOVERY_SERVER=server, ROS_SUPER_CLIENT="TRUE")}
+        try:
+            for name, env in rounds.items():
+                hosts.net_env = env
+                if name == "server":
+                    fastdds = str(Path(executable_path("mcap_play")).parent / "fastdds")
+                    discovery = subprocess.Popen([*hosts.recorder.prefix, fastdds, "discovery", "-i", "0", "-l",
+                                                  hosts.recorder.address, "-p", "11811"], env=dict(os.environ, **env),
+                                                 stdout=open(tmp_path / "discovery.log", "w"), stderr=subprocess.STDOUT)
+                    hosts.cleanups.append(discovery)
+                    time.sleep(2.0)
+                log, out = f"record_{name}.log", tmp_path / name
+                recorder = hosts.record([f"/{CAM}/image"], out, log)
+                player = hosts.play(bag, 1.0, wait_s=8)
+                assert player.wait(60) == 0, hosts.log("play.log")
+                time.sleep(1.5)
+                recorder.stop()
+                assert recorder.process.returncode == 0, hosts.log(log)
+                if name == "no_peers":
+                    assert "wrote 0 messages" in hosts.log(log), "multicast is off: nothing should be discovered"
+                else:
+                    # discovered (the first frame may go out just before the recorder has matched the player)
+                    assert len(_messages(out, f"/{CAM}/image")) >= 15, (name, hosts.log(log))
+        finally:
+            hosts.stop_all()
