@@ -142,6 +142,9 @@ class Player:
         return self.report
 
 
+LINGER_S = 1.0  # after the last message, before the node goes away
+
+
 def _parse_remaps(pairs: list[str]) -> dict[str, str]:
     out = {}
     for pair in pairs:
@@ -205,6 +208,10 @@ def main(args: list[str] | None = None) -> int:
     try:
         while thread.is_alive() and rclpy.ok():
             thread.join(timeout=0.1)
+        # played to the end: give the last messages time to leave (large ones go out in fragments
+        # from a sending thread; destroying the node at once lost the last image over UDP)
+        if not thread.is_alive() and rclpy.ok():
+            time.sleep(LINGER_S)
     except KeyboardInterrupt:
         pass
     finally:

@@ -11,7 +11,9 @@ node's clock (``use_sim_time`` honoured), publish time the publisher's source ti
 rather than after the first ``/clock``; messages that arrive before it are held (up to
 ``--max-pending``) and written with the first ``/clock`` time. ``--max-bag-size`` and
 ``--max-bag-duration`` split a directory recording into ``<name>_0.mcap, <name>_1.mcap, ...`` as
-``ros2 bag record`` does, with ``metadata.yaml`` listing them. Ctrl-C or SIGTERM finish the file
+``ros2 bag record`` does, with ``metadata.yaml`` listing them. Messages that never arrived (a lossy
+link, a host cut off) are counted from the publisher's sequence numbers, on topics with one
+publisher, logged and summed up at the end ("missed"). Ctrl-C or SIGTERM finish the file
 properly; after a hard kill, the file holds everything up to the last chunk flushed (every
 ``--flush-interval`` s) but has no index: indexed readers (``ros2 bag``, rosbags, Foxglove) refuse
 it until ``mcap_record --recover IN OUT`` rewrites it (``mcap_play`` and our tools read it as is,
@@ -51,6 +53,11 @@ class Recorder:
         self.max_pending = max_pending
         self.pending: list[tuple[str, str, bytes, int | None]] = []
         self.dropped = 0
+        # sequence gaps: messages the publisher sent that never arrived (topics with one publisher)
+        self.missed: dict[str, int] = {}
+        self.gaps: dict[str, int] = {}
+        self._last_sequence: dict[str, int] = {}
+        self._single_publisher: set[str] = set()
 
     def _absolute(self, topic: str) -> str:
         from rclpy.validate_full_topic_name import validate_full_topic_name  # noqa: PLC0415
@@ -69,6 +76,12 @@ class Recorder:
     def discover(self) -> None:
         """Subscribe to every wanted topic that has publishers and no subscription yet."""
         for topic, types in self.node.get_topic_names_and_types():
+            if topic in self.subscriptions:  # with several publishers, sequence numbers interleave
+                if self.node.count_publishers(topic) == 1:
+                    self._single_publisher.add(topic)
+                else:
+                    self._single_publisher.discard(topic)
+                    self._last_sequence.pop(topic, None)
             if topic in self.subscriptions or not self.wanted(topic) or not types:
                 continue
             type_name = types[0]
@@ -105,6 +118,8 @@ class Recorder:
         def on_message(data: bytes, info) -> None:
             receive_ns = clock.now().nanoseconds
             source_ns = info.get("source_timestamp") if isinstance(info, dict) else None
+            if isinstance(info, dict) and topic in self._single_publisher:
+                self._count_gap(topic, info.get("publication_sequence_number"))
             if receive_ns == 0 and self.sim_time:
                 self._hold(topic, type_name, data, source_ns)
                 return
@@ -156,6 +171,22 @@ class Recorder:
         if self.sim_time:
             self.timers.append(self.node.create_timer(0.1, self.release_pending, clock=steady))
         self.discover()
+
+
+    def _count_gap(self, topic: str, sequence: int | None) -> None:
+        if not sequence:  # 0 or None: the middleware does not number messages
+            return
+        last = self._last_sequence.get(topic)
+        self._last_sequence[topic] = sequence
+        if last is None or sequence <= last:  # the first one, or a restarted publisher numbering anew
+            return
+        missed = sequence - last - 1
+        if missed > 0:
+            with self._lock:
+                self.missed[topic] = self.missed.get(topic, 0) + missed
+                self.gaps[topic] = self.gaps.get(topic, 0) + 1
+            self.node.get_logger().warning(f"{topic}: {missed} messages missed (sequence {last} -> {sequence}); "
+                                           f"{self.missed[topic]} in {self.gaps[topic]} gaps so far")
 
 
 def default_output_name() -> str:
@@ -240,7 +271,8 @@ def main(args: list[str] | None = None) -> int:
     print(f"mcap_record: wrote {writer.message_count} messages, {writer.bytes_written / 1e6:.2f} MB of payload, "
           f"to {output}{files}")
     for topic, count in sorted(writer.topic_counts.items()):
-        print(f"  {topic}: {count}")
+        missed = recorder.missed.get(topic, 0)
+        print(f"  {topic}: {count}" + (f" ({missed} missed in {recorder.gaps[topic]} gaps)" if missed else ""))
     return 1 if recorder.errors else 0
 
 

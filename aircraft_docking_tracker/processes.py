@@ -49,10 +49,11 @@ class NodeProcess:
     remaps: dict[str, str] = field(default_factory=dict)
     log_path: str | Path | None = None
     env: dict[str, str] | None = None
+    prefix: list[str] = field(default_factory=list)  # a wrapper that execs the rest (netns.Host.prefix)
     process: subprocess.Popen | None = None
 
     def command(self) -> list[str]:
-        cmd = [executable_path(self.executable), *map(str, self.args), "--ros-args"]
+        cmd = [*self.prefix, executable_path(self.executable), *map(str, self.args), "--ros-args"]
         if self.namespace:
             cmd += ["-r", f"__ns:=/{self.namespace.strip('/')}"]
         if self.node_name:

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 BENCH = Path(__file__).resolve().parent
-ORDER = ["foundation", "scenarios", "docking", "detector", "association", "pipeline"]
+ORDER = ["foundation", "scenarios", "docking", "detector", "association", "pipeline", "multihost"]
 
 
 def main() -> int:

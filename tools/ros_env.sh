@@ -18,10 +18,18 @@ esac
 export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 export RMW_IMPLEMENTATION="${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}"
 export ROS_LOG_DIR="${ROS_LOG_DIR:-${TMPDIR:-/tmp}/aircraft_docking_tracker-ros-log}"
-export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+# One host by default (LOCALHOST). ADT_MULTIHOST=1: nodes on several hosts (README "Several hosts"):
+# discovery over the subnet and config/fastdds_multihost.xml (shared memory + UDPv4, large socket buffers).
+if [ "${ADT_MULTIHOST:-0}" = "1" ]; then
+  export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-SUBNET}"
+  _adt_profile=fastdds_multihost.xml
+else
+  export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+  _adt_profile=fastdds_large_images.xml
+fi
 # Shared-memory segments large enough for camera images (config/fastdds_large_images.xml explains).
 if [ -z "${FASTDDS_DEFAULT_PROFILES_FILE:-}" ] && [ -z "${FASTRTPS_DEFAULT_PROFILES_FILE:-}" ]; then
-  _adt_xml="$(cd "$(dirname "${BASH_SOURCE[0]:-$0}")/.." && pwd)/config/fastdds_large_images.xml"
+  _adt_xml="$(cd "$(dirname "${BASH_SOURCE[0]:-$0}")/.." && pwd)/config/$_adt_profile"
   if [ -f "$_adt_xml" ]; then
     export FASTDDS_DEFAULT_PROFILES_FILE="$_adt_xml" FASTRTPS_DEFAULT_PROFILES_FILE="$_adt_xml"
   fi
@@ -33,4 +41,4 @@ case ":$PATH:" in
   *":$_adt_venv/bin:"*) ;;
   *) export PATH="$_adt_venv/bin:$PATH" ;;
 esac
-unset _adt_venv _adt_site _adt_ld _adt_d
+unset _adt_venv _adt_site _adt_ld _adt_d _adt_profile
