@@ -45,6 +45,10 @@ class AppearanceConfig:
     forgetting: float = param(0.95, "incremental PCA forgetting factor f (IVT: 0.95)", low=0.5, high=1.0)
     robust_sigma: float = param(0.7, "Geman-McClure scale σ of the residual of normalised patches",
                                 low=0.05, high=5.0)
+    anchor_weight: float = param(0.0, "weight β of the anchor term: Sim = (1-β) Sim_subspace + β Sim_anchor, "
+                                 "Sim_anchor the same robust score against the first frame's patch alone "
+                                 "(never updated, so the model cannot learn a drift away from it); 0: the "
+                                 "subspace alone (the seed's)", low=0.0, high=1.0)
     feature_size: int = param(8, "side of the estimator's feature patch [px]", low=4, high=32)
     ridge: float = param(30.0, "estimator ridge penalty λ", low=1e-6, high=1e4)
     train_samples: int = param(300, "estimator training perturbations at start", low=12, high=2000)
@@ -120,6 +124,7 @@ class ObservationModel:
         self.subspace = IncrementalSubspace(config.template_width * config.template_height,
                                             config.max_basis, config.forgetting)
         self._pending: list[np.ndarray] = []
+        self.anchor = np.zeros(config.template_width * config.template_height, dtype=np.float32)
 
     @property
     def started(self) -> bool:
@@ -134,14 +139,30 @@ class ObservationModel:
 
     def start(self, patches: np.ndarray) -> None:
         """Initialise the subspace from the first frame's patch(es)."""
-        self.subspace.update(normalize(self._check(patches)))
+        y = normalize(self._check(patches))
+        self.subspace.update(y)
+        self.anchor = y.mean(axis=0)
         self._pending.clear()
 
     def similarity(self, patches: np.ndarray) -> np.ndarray:
         """``Sim(o(X))`` per patch: ``1 - mean ρ(e)`` (choice 3), in (0, 1]."""
         if not self.started:
             raise AppearanceError("observation model used before start()")
-        e2 = self.subspace.residual(normalize(self._check(patches))) ** 2
+        y = normalize(self._check(patches))
+        s2 = np.float32(self.config.robust_sigma ** 2)
+        e2 = self.subspace.residual(y) ** 2
+        sim = 1.0 - (e2 / (e2 + s2)).mean(axis=1)
+        beta = self.config.anchor_weight
+        if beta > 0:
+            sim = (1 - beta) * sim + beta * self.anchor_similarity(y, normalized=True)
+        return sim
+
+    def anchor_similarity(self, patches: np.ndarray, normalized: bool = False) -> np.ndarray:
+        """``Sim_anchor``: the robust score of each patch against the first frame's patch alone."""
+        if not self.started:
+            raise AppearanceError("observation model used before start()")
+        y = patches if normalized else normalize(self._check(patches))
+        e2 = (y - self.anchor) ** 2
         s2 = np.float32(self.config.robust_sigma ** 2)
         return 1.0 - (e2 / (e2 + s2)).mean(axis=1)
 

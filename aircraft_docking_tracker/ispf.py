@@ -9,7 +9,9 @@ adds particles only while the best similarity is still below ``μ_T - σ_T`` (st
 Choices the seed leaves open (Li et al. 2012 define them; named here):
 
 * ``μ_T, σ_T``: exponentially forgetting mean / standard deviation of the scores ``Ŝ_t`` of
-  past frames (forgetting ``stats_forgetting``); initialised with the start patch's score.
+  past frames (forgetting ``stats_forgetting``); initialised with the median score of states one
+  noise step off the start (the start patch itself scores 1.0, which made the first ~10 frames
+  use all ``N_total`` particles).
 * Constants: the seed gives no value for any of them (nor for ``N_total``, ``ΔN_0``,
   ``α_inc``, ``a``, ``Σ_g``); the defaults are ours, IVT's where IVT has one, chosen on OTB Car4.
 * ``μ_B, σ_B``: the same statistics of the similarity of ``background_samples`` states placed
@@ -26,7 +28,17 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   the seed's rule) and ``μ_T - 3σ_T`` lets the hidden frames' own low scores widen σ_T until the
   background is learnt anyway.
 * Resampling (steps 6c and 9): systematic resampling with weights ``exp((S - S_max) / τ)``.
-* The estimate ``X̂_t`` is the best particle (step 7) for both filters.
+* The estimate ``X̂_t`` (step 7, ``estimate``): by default the weighted mean on the group of the
+  ``top_k`` best particles (weights ``exp((S - S_max)/τ)``), so that a rounding-level change of a
+  score moves X̂ by a rounding-level amount; the seed's argmax particle jumps between particles
+  and made one run's outcome hang on the CPU's BLAS kernel (issue 11). ``Ŝ_t`` is the score of X̂.
+* The chart (``chart``): noise and AR momentum act on the named parameters (centre along the
+  object's own axes in object widths / heights, log scale, log aspect, rotation, skew), i.e. on
+  the target's own w x h, not on the unit square, where a rotation step of a 2:1 target is an
+  image rotation plus a shear. The AR momentum moves only centre and scale (``ar_dims``); skew
+  and log aspect are pulled back each frame (``skew_pull`` to 0, ``aspect_pull`` to the start's).
+* Self-tuning keeps a step only when it raises Sim by more than ``tune_min_gain`` and stops
+  moving a particle whose last step was refused (it is not re-scored at the same state).
 * Each particle is tuned by up to ``tune_iterations`` estimator steps, each kept only if it
   raises the particle's similarity (a particle never gets worse by tuning). By default only the
   translation (E5, E6) is tuned (``tune_dims``): tuning all six directions, as Li et al. do,
@@ -68,6 +80,24 @@ class FilterConfig(AppearanceConfig):
     sigma_skew: float = param(0.005, "Σ_g σ_φ: skew noise (E4)", low=0.0, high=1.0)
     sigma_x: float = param(0.08, "Σ_g σ_x: x noise (E5, template widths)", low=0.0, high=2.0)
     sigma_y: float = param(0.08, "Σ_g σ_y: y noise (E6, template heights)", low=0.0, high=2.0)
+    chart: str = param("metric", "where the noise of eq. 3 and the AR momentum act: metric = on the named "
+                       "parameters (centre in object widths/heights along the object's axes, log scale, log "
+                       "aspect, rotation, skew; the target's own w x h, so a rotation step is an image rotation); "
+                       "unit = on the Lie algebra of the unit-square template (the seed's)",
+                       choices=("metric", "unit"))
+    ar_dims: str = param("motion", "parameters the AR(1) momentum (eq. 4) moves: motion = centre and scale "
+                         "(an aircraft's shape has no momentum); all = all six (the seed's)",
+                         choices=("motion", "all"))
+    skew_pull: float = param(0.3, "metric chart: fraction of a particle's skew pulled back to 0 per frame "
+                             "(an aircraft does not shear)", low=0.0, high=1.0)
+    aspect_pull: float = param(0.1, "metric chart: fraction of a particle's log aspect pulled back to the "
+                               "start state's per frame", low=0.0, high=1.0)
+    estimate: str = param("weighted", "X̂_t (step 7): weighted = weighted mean on the group of the top_k "
+                          "particles, weights exp((S - S_max)/τ); best = the argmax particle (the seed's)",
+                          choices=("weighted", "best"))
+    top_k: int = param(10, "weighted estimate: particles averaged", low=1, high=1000)
+    tune_min_gain: float = param(1e-3, "self-tuning keeps a step only if it raises Sim by more than this "
+                                 "(a margin, so rounding does not decide)", low=0.0, high=0.1)
     tune_dims: str = param("translation", "Lie-algebra directions the estimator corrects in self-tuning: "
                            "translation (E5, E6; measured best), translation+scale (E1, E5, E6) or all six "
                            "(Li et al.)", choices=("translation", "translation+scale", "all"))
@@ -152,6 +182,7 @@ class AffineParticleFilter:
         self._ring[:, 4] = config.background_offset * np.cos(angles)
         self._ring[:, 5] = config.background_offset * np.sin(angles)
         self.estimate = self.previous = None
+        self._prior_log_aspect = 0.0
         self.particles = np.zeros((0, 3, 3))
         self._image, self._level, self._frame_shape = None, 0, (0, 0)
 
@@ -183,8 +214,43 @@ class AffineParticleFilter:
                                self._level, self.grid)
 
     def _noise(self, n: int) -> np.ndarray:
-        """exp(dΩ), dΩ = Σ w_i E_i, w ~ N(0, Σ_g) (eq. 3), for n particles."""
+        """exp(dΩ), dΩ = Σ w_i E_i, w ~ N(0, Σ_g) (eq. 3), for n particles (unit chart)."""
         return ag.exp_coords(self.rng.normal(size=(n, 6)) * self.config.sigmas())
+
+    def _perturb(self, states: np.ndarray) -> np.ndarray:
+        """The random part of eq. 3 in the configured chart (plus the metric chart's shape pull)."""
+        if self.config.chart == "unit":
+            return states @ self._noise(len(states))
+        q = to_chart(states)
+        w = self.rng.normal(size=(len(states), 6)) * self.config.sigmas()
+        half = q[:, 3] / 2
+        width, height = np.exp(q[:, 2] + half), np.exp(q[:, 2] - half)   # object w, h [px]
+        du, dv = w[:, 4] * width, w[:, 5] * height                       # along the object's axes
+        c, s = np.cos(q[:, 4]), np.sin(q[:, 4])
+        q[:, 0] += c * du - s * dv
+        q[:, 1] += s * du + c * dv
+        q[:, 2] += w[:, 0]
+        q[:, 3] += 2 * w[:, 1]                                           # E2 is half the log aspect
+        q[:, 4] += w[:, 2]
+        q[:, 5] += w[:, 3]
+        q[:, 5] *= 1.0 - self.config.skew_pull
+        q[:, 3] += self.config.aspect_pull * (self._prior_log_aspect - q[:, 3])
+        return from_chart(q)
+
+    def _velocity(self, particles: np.ndarray) -> np.ndarray:
+        """Particles moved by the AR(1) momentum A_{t-1} = a log(X̂_{t-2}^{-1} X̂_{t-1}) (eq. 4)."""
+        cfg = self.config
+        if cfg.chart == "unit" and cfg.ar_dims == "all":
+            return particles @ ag.expm(cfg.ar * ag.logm(ag.inverse(self.previous) @ self.estimate))
+        if cfg.chart == "unit":
+            v = ag.log_coords(ag.inverse(self.previous) @ self.estimate) * cfg.ar
+            v[1:4] = 0.0
+            return particles @ ag.exp_coords(v)
+        dq = cfg.ar * (to_chart(self.estimate[None]) - to_chart(self.previous[None]))[0]
+        if cfg.ar_dims == "motion":
+            dq[3:] = 0.0
+        dq[4] = (dq[4] + np.pi) % (2 * np.pi) - np.pi
+        return from_chart(to_chart(particles) + dq)
 
     def _valid(self, states: np.ndarray) -> np.ndarray:
         """States that are still a plausible object: positive det, sides >= min_side, on the frame."""
@@ -198,9 +264,8 @@ class AffineParticleFilter:
                 & (centre[:, 1] > -0.5 * h) & (centre[:, 1] < 1.5 * h))
 
     def _transition(self, particles: np.ndarray) -> np.ndarray:
-        """Steps 1-2: A_{t-1} = a log(X̂_{t-2}^{-1} X̂_{t-1}) (eq. 4); X_t = X_{t-1} exp(A) exp(dΩ) (eq. 3)."""
-        velocity = ag.expm(self.config.ar * ag.logm(ag.inverse(self.previous) @ self.estimate))
-        moved = particles @ velocity @ self._noise(len(particles))
+        """Steps 1-2: X_t = X_{t-1} exp(A_{t-1}) exp(dΩ) (eqs. 3-4), in the configured chart."""
+        moved = self._perturb(self._velocity(particles))
         keep = self._valid(moved)
         return np.where(keep[:, None, None], moved, particles)
 
@@ -233,15 +298,18 @@ class AffineParticleFilter:
         self._train_estimator(state, self.config.train_samples, forget=False)
         self.track_stats = RunningStats(self.config.stats_forgetting)
         self.background_stats = RunningStats(self.config.stats_forgetting)
-        self.track_stats.add(self._score(state[None])[0])
+        self._prior_log_aspect = float(to_chart(state[None])[0, 3])
+        # μ_T starts at what states one noise step off the start score (the start patch itself scores 1.0,
+        # which would make the first frames use all N_total particles)
+        near = self._perturb(np.repeat(state[None], max(self.config.background_samples, 8), axis=0))
+        self.track_stats.add(np.median(self._score(near)[0]))
         self.background_stats.add(self._score(state @ ag.exp_coords(self._ring))[0])
         self.estimate = self.previous = state
         self.particles = np.repeat(state[None], self.n_carried, axis=0)
 
     def _finish(self, states: np.ndarray, scores: np.ndarray, patches: np.ndarray) -> FrameResult:
         """Steps 7-9: X̂_t = best particle, conditional model update, resample the carried set."""
-        best = int(np.argmax(scores))
-        estimate, score = states[best].copy(), float(scores[best])     # step 7
+        estimate, score, patch = self._estimate(states, scores, patches)  # step 7
         self.background_stats.add(self._score(estimate @ ag.exp_coords(self._ring))[0])
         rule = self.config.update_rule
         updated = rule == "always" or score > self.background_stats.mean + self.background_stats.std
@@ -249,12 +317,32 @@ class AffineParticleFilter:
             updated = updated and score >= self.config.update_min_score
         updated = bool(updated)                                           # step 8
         if updated:
-            self.model.add(patches[best])
+            self.model.add(patch)
             self._train_estimator(estimate, self.config.update_samples)
         self.track_stats.add(score)
         self.previous, self.estimate = self.estimate, estimate
         self.particles = self._resample(states, scores, self.n_carried)  # step 9
         return FrameResult(estimate, score, len(states), bool(updated), states)
+
+    def _estimate(self, states: np.ndarray, scores: np.ndarray, patches: np.ndarray):
+        """Step 7: X̂_t, its score Ŝ_t and its patch, by ``config.estimate``.
+
+        ``weighted``: X̂ = X_b exp(Σ w_i log(X_b^{-1} X_i) / Σ w_i) over the top_k particles (X_b the
+        best, w_i = exp((S_i - S_max)/τ)), a mean on the group that a rounding-level change of one
+        particle's score moves by a rounding-level amount (the argmax jumps between particles).
+        """
+        order = np.argsort(-scores, kind="stable")
+        best = int(order[0])
+        if self.config.estimate == "best" or len(states) == 1:
+            return states[best].copy(), float(scores[best]), patches[best]
+        top = order[:self.config.top_k]
+        w = np.exp((scores[top] - scores[best]) / self.config.temperature)
+        offsets = ag.log_coords(ag.inverse(states[best]) @ states[top])
+        estimate = states[best] @ ag.exp_coords((w[:, None] * offsets).sum(axis=0) / w.sum())
+        if not self._valid(estimate[None])[0]:
+            return states[best].copy(), float(scores[best]), patches[best]
+        score, patch = self._score(estimate[None])
+        return estimate, float(score[0]), patch[0]
 
     def step(self, frame: np.ndarray) -> FrameResult:
         """One frame of the plain PF: propagate the fixed set, weigh by Sim, steps 7-9."""
@@ -278,13 +366,16 @@ class ISPF(AffineParticleFilter):
         states = states.copy()
         scores, patches = self._score(states)
         mask = self.config.tune_mask()
+        active = np.arange(len(states))          # particles whose last step was kept (the others stay put)
         for _ in range(self.config.tune_iterations):
-            proposal = states @ ag.exp_coords(self.estimator.predict(patches) * mask)
-            new_scores, new_patches = self._score(proposal)
-            better = (new_scores > scores) & self._valid(proposal)
-            if not better.any():
+            if not len(active):
                 break
-            states[better], scores[better], patches[better] = proposal[better], new_scores[better], new_patches[better]
+            proposal = states[active] @ ag.exp_coords(self.estimator.predict(patches[active]) * mask)
+            new_scores, new_patches = self._score(proposal)
+            better = (new_scores > scores[active] + self.config.tune_min_gain) & self._valid(proposal)
+            kept = active[better]
+            states[kept], scores[kept], patches[kept] = proposal[better], new_scores[better], new_patches[better]
+            active = kept
         return states, scores, patches
 
     def step(self, frame: np.ndarray) -> FrameResult:
@@ -300,7 +391,7 @@ class ISPF(AffineParticleFilter):
         while scores.max() < target and n < cfg.n_total:                # step 5
             batch = int(min(np.ceil(cfg.alpha_inc * batch), cfg.n_total - n))       # 6b
             new = self._resample(states, scores, batch)                             # 6c
-            new = new @ self._noise(batch)                                          # 6d
+            new = self._perturb(new)                                                # 6d
             new, new_scores, new_patches = self.self_tune(new)                      # 6e
             n += batch                                                              # 6f
             states = np.concatenate([states, new])                                  # 6g
@@ -312,3 +403,17 @@ class ISPF(AffineParticleFilter):
 def make_filter(config: FilterConfig) -> AffineParticleFilter:
     """The filter named by ``config.method``."""
     return ISPF(config) if config.method == "ispf" else AffineParticleFilter(config)
+
+
+def to_chart(states: np.ndarray) -> np.ndarray:
+    """States (N, 3, 3) -> metric chart rows (cx, cy, log scale, log aspect, rotation, skew)."""
+    p = ag.to_params(states)
+    p[:, 2], p[:, 3] = np.log(p[:, 2]), np.log(p[:, 3])
+    return p
+
+
+def from_chart(q: np.ndarray) -> np.ndarray:
+    """Metric chart rows (N, 6) -> states (N, 3, 3); inverse of :func:`to_chart`."""
+    p = np.array(q, dtype=float)
+    p[:, 2], p[:, 3] = np.exp(p[:, 2]), np.exp(p[:, 3])
+    return ag.from_params(p)

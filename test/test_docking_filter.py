@@ -53,20 +53,66 @@ def run_filter(config, frames=40):
     return np.array(ious), np.array(particles), flt
 
 
+SEEDS = range(5)
+
+
 def test_ispf_locks_onto_a_moving_growing_turning_target():
-    ious, particles, flt = run_filter(FilterConfig(method="ispf", seed=1))
-    assert ious.mean() > 0.75, ious.round(2)
-    assert ious[-10:].min() > 0.6, ious.round(2)
-    assert particles.min() >= 20 and particles.max() <= 300
-    cx, cy, scale, aspect, rotation, _ = ag.to_params(flt.estimate)
-    assert abs(scale / (np.sqrt(48 * 32) * 1.5) - 1) < 0.15
-    assert abs(np.rad2deg(rotation) - 20) < 8
+    """Medians over tracker seeds (one draw may be unlucky on some CPU's rounding; the median is not)."""
+    runs = [run_filter(FilterConfig(method="ispf", seed=s)) for s in SEEDS]
+    assert np.median([ious.mean() for ious, _, _ in runs]) > 0.8, [ious.mean().round(2) for ious, _, _ in runs]
+    assert np.median([ious[-10:].min() for ious, _, _ in runs]) > 0.7
+    assert all(p.min() >= 20 and p.max() <= 300 for _, p, _ in runs)
+    params = np.array([ag.to_params(flt.estimate) for _, _, flt in runs])
+    assert abs(np.median(params[:, 2]) / (np.sqrt(48 * 32) * 1.5) - 1) < 0.15      # scale
+    assert abs(np.rad2deg(np.median(params[:, 4])) - 20) < 8                         # rotation
+    assert abs(np.median(params[:, 3]) / 1.5 - 1) < 0.15                             # aspect kept
+    assert np.rad2deg(np.abs(params[:, 5])).max() < 3                                # no shear
 
 
 def test_plain_pf_with_the_same_model_also_tracks():
-    ious, particles, _ = run_filter(FilterConfig(method="pf", pf_particles=300, seed=1))
-    assert (particles == 300).all()
-    assert ious.mean() > 0.6, ious.round(2)
+    runs = [run_filter(FilterConfig(method="pf", pf_particles=300, seed=s)) for s in SEEDS]
+    assert all((p == 300).all() for _, p, _ in runs)
+    assert np.median([ious.mean() for ious, _, _ in runs]) > 0.7
+
+
+def test_the_seeds_choices_stay_selectable_and_track():
+    """The seed's unit-square chart, AR on all six, argmax estimate and update rule (config/docking_tracker_seed.yaml)."""
+    cfg = dict(chart="unit", ar_dims="all", estimate="best", update_rule="background", tune_min_gain=0.0,
+               skew_pull=0.0, aspect_pull=0.0)
+    runs = [run_filter(FilterConfig(seed=s, **cfg)) for s in SEEDS]
+    assert np.median([ious.mean() for ious, _, _ in runs]) > 0.6
+
+
+def test_metric_chart_rotation_noise_is_an_image_rotation_without_shear():
+    """On a 4:1 target, σ_θ alone turns the quadrilateral and leaves aspect and skew untouched (metric
+    chart); on the unit-square chart the same step shears it (the seed's, the issue's finding)."""
+    frame, _ = next(moving_target_scene(1))
+    X = ag.from_params([160, 120, 40, 4.0, 0.3, 0.0])
+    zero = dict(sigma_scale=0, sigma_aspect=0, sigma_skew=0, sigma_x=0, sigma_y=0, sigma_rotation=0.05,
+                skew_pull=0.0, aspect_pull=0.0)
+    skews = {}
+    for chart in ("metric", "unit"):
+        flt = AffineParticleFilter(FilterConfig(chart=chart, **zero))
+        flt.start(frame, X)
+        p = ag.to_params(flt._perturb(np.repeat(X[None], 200, axis=0)))
+        skews[chart] = np.abs(p[:, 5]).mean()
+        if chart == "metric":
+            assert np.allclose(p[:, 2:4], [40, 4.0]) and p[:, 4].std() > 0.03
+    assert skews["metric"] < 1e-9 < 0.01 < skews["unit"]
+
+
+def test_weighted_estimate_moves_little_when_one_score_moves_a_rounding_step():
+    frame, X = next(moving_target_scene(1))
+    flt = AffineParticleFilter(FilterConfig(seed=0))
+    flt.start(frame, X)
+    states = flt._perturb(np.repeat(X[None], 50, axis=0))
+    scores, patches = flt._score(states)
+    order = np.argsort(-scores)
+    scores[order[1]] = scores[order[0]] + 1e-7                      # the argmax flips to another particle
+    a = flt._estimate(states, scores, patches)[0]
+    scores[order[1]] = scores[order[0]] - 1e-7
+    b = flt._estimate(states, scores, patches)[0]
+    assert np.abs(ag.to_quad(a) - ag.to_quad(b)).max() < 0.05      # pixels
 
 
 def test_ispf_uses_fewer_particles_than_its_maximum_when_the_target_is_easy():

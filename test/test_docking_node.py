@@ -149,3 +149,10 @@ def test_node_in_process_over_a_bag(tmp_path):
         finally:
             node.destroy_node()
             probe.destroy_node()
+
+
+def test_seed_preset_selects_the_seeds_choices():
+    params = load_yaml_parameters(package_config_dir() / "docking_tracker_seed.yaml", "docking_tracker")
+    config = DockingConfig(**params)
+    assert (config.chart, config.ar_dims, config.estimate, config.update_rule) == ("unit", "all", "best", "background")
+    assert config.skew_pull == config.aspect_pull == config.tune_min_gain == config.anchor_weight == 0.0

@@ -4,10 +4,12 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker.bag import BagReader
+from aircraft_docking_tracker.docking import DockingConfig
 from aircraft_docking_tracker.docking_tracker_node import DockingTrackerNode
 from aircraft_docking_tracker.evaluation.evaluate import EvaluateConfig, evaluate_bags
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table
 from aircraft_docking_tracker.offline import build_processor, run
+from aircraft_docking_tracker.sot_track import open_sequence, score_run, track
 from multi_target_tracker.association_node import AssociationNode
 from rclpy.parameter import Parameter
 
@@ -58,5 +60,15 @@ def test_docking_tracker_live_equals_offline_and_follows_the_aircraft(scenes, tm
         offline_quads = [[(p.x, p.y) for p in m.polygon.points] for _, m, _ in BagReader(offline).ros_messages(["/docking/polygon"])]
         assert live_quads == offline_quads
     scores = evaluate_bags(live, config=EvaluateConfig(namespace="dock"))
-    assert scores["sot"]["success_auc"] > 0.45, scores["sot"]
-    assert scores["sot"]["precision_px"] == 20 and scores["sot"]["precision"] > 0.5, scores["sot"]
+    assert scores["sot"]["precision_px"] == 20 and np.isfinite(scores["sot"]["success_auc"]), scores["sot"]
+    # Quality over tracker seeds (one draw of a particle filter hangs on the CPU's rounding; the median
+    # does not): the offline core on the same frames, from the same loose box.
+    aucs, precisions = [], []
+    for seed in range(5):
+        seq = open_sequence(scenes["docking"])
+        r = track(seq.frames, np.array(box), DockingConfig(seed=seed), seq.count, progress=False)
+        s = score_run(r, seq.gt)
+        aucs.append(s["success_auc"])
+        precisions.append(s["precision"])
+    assert np.median(aucs) > 0.5, aucs
+    assert np.median(precisions) > 0.7, precisions
