@@ -115,7 +115,8 @@ def main(argv=None) -> int:
         if args.json:
             print(json.dumps(scores.as_dict(with_continuity=True), indent=1))
         else:
-            print(f"MOTA {100 * scores.mota:.1f}  MOTP {100 * scores.motp:.1f}  IDF1 {100 * scores.idf1:.1f}  "
+            print(f"HOTA {100 * scores.hota:.1f}  DetA {100 * scores.deta:.1f}  AssA {100 * scores.assa:.1f}  "
+                  f"MOTA {100 * scores.mota:.1f}  MOTP {100 * scores.motp:.1f}  IDF1 {100 * scores.idf1:.1f}  "
                   f"IDSW {scores.num_switches}  FRAG {scores.num_fragmentations}  MT {scores.mostly_tracked}  "
                   f"ML {scores.mostly_lost}  FP {scores.num_false_positives}  FN {scores.num_misses}")
             print("seed 003 Fig. 4 (frames of continuous tracking per target): " + ", ".join(

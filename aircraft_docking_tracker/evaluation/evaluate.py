@@ -10,7 +10,7 @@ The metric family follows from the topics present (output / ground truth):
 * ``docking/polygon`` vs ``ground_truth/polygon`` -> single target (``sot_metrics``: OTB success
   AUC, precision at 20 px, lost frames; polygon IoU; nose error when ``ground_truth/stand`` and
   ``ground_truth/nose`` are there);
-* ``tracks`` vs ``ground_truth`` (rows with ``id``) -> multi target (``mot_metrics``: MOTA, MOTP,
+* ``tracks`` vs ``ground_truth`` (rows with ``id``) -> multi target (``mot_metrics``: HOTA, DetA, AssA, MOTA, MOTP,
   IDF1, ID switches, fragmentations, MT/ML, seed 003 Fig. 4 continuity);
 * ``detections`` vs ``ground_truth`` -> detection (``detection_metrics``: seed 003 Table 1 rates,
   PR curve, AP);
