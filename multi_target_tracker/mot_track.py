@@ -1,16 +1,21 @@
 """``mot_track``: the association core over a MOTChallenge ``det.txt``, writing MOTChallenge results.
 
     mot_track DET.txt -o results.txt [--fps 25 | --seqinfo seqinfo.ini] [--min-score 0.3] [--gt gt.txt]
+              [--score-scale 100]
               [--no-coasting] [--backfill] [--params config/association.yaml] [--gate cost ...]
 
 The very same :class:`MultiTargetTracker` as ``association_node``; every parameter of
 ``config/association.yaml`` is also an option (``--max-misses``, ``--kalman-acceleration-noise``,
 ...). Frame ``k`` has the stamp ``(k - 1) / fps``. With ``--gt`` the MOT metrics are printed, and
-seed 003's Fig. 4 measure (frames of continuous tracking per ground-truth target).
-By default the output is what the live node publishes (confirmed and coasting tracks);
+seed 003's Fig. 4 measure (frames of continuous tracking per ground-truth target), and HOTA.
+Scores: thresholds (``--min-score``, ``--high-score``) are fractions; a file whose scores go above 1
+(and not above 100) is read as percent unless ``--score-scale`` is given. A ``seqinfo.ini`` that
+disagrees with the detections (``seqLength`` shorter, boxes outside the image) is reported; every
+frame of the data is tracked.
+By default the output is what the live node publishes (confirmed tracks and coasting ones while their
+prediction is trusted: states 1 and 2);
 ``--no-coasting`` drops coasting ones, ``--backfill`` adds a confirmed track's tentative frames
-(offline only). Seed 003 as written: ``--gate cost --confirm-length 15 --tentative-max-misses 10
---iou-weight 0 --second-pass false``.
+(offline only). Seed 003 as written: ``--params config/association_seed.yaml``.
 """
 from __future__ import annotations
 
@@ -97,8 +102,19 @@ def main(argv=None) -> int:
     info = mc.read_seqinfo(args.seqinfo or args.det.parent)
     fps = args.fps or info.get("frameRate") or 30.0
     assoc, kalman = configs_from(args)
-    detections = mc.read_detections(args.det)
-    last = info.get("seqLength") or (int(detections["frame"].max()) if len(detections) else 0)
+    try:
+        detections = mc.read_detections(args.det)
+        if args.score_scale is None:                       # not declared: detected from the file
+            assoc.score_scale = mc.score_scale_of(detections["score"])
+            if assoc.score_scale != 1.0:
+                print(f"mot_track: {args.det} has scores up to {detections['score'].max():g}: read as percent "
+                      "(--score-scale 100; min_score and high_score are fractions)", file=sys.stderr)
+    except mc.MotFormatError as exc:
+        print(f"mot_track: {exc}", file=sys.stderr)
+        return 2
+    for warning in mc.seqinfo_disagreements(info, detections):
+        print(f"mot_track: warning: {warning}", file=sys.stderr)
+    last = max(info.get("seqLength") or 0, int(detections["frame"].max()) if len(detections) else 0)
     if args.gt:
         gt = mc.read_ground_truth(args.gt)
         last = max(last, int(gt["frame"].max()) if len(gt) else 0)

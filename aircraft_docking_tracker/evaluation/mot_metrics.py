@@ -253,10 +253,40 @@ def evaluate_rows(gt_rows: np.ndarray, hyp_rows: np.ndarray, iou_threshold: floa
     Every frame from 1 to the last frame of either file counts (frames without ground truth add
     the hypotheses there as false positives).
     """
+    return evaluator_of_rows(gt_rows, hyp_rows, iou_threshold).result()
+
+
+def evaluator_of_rows(gt_rows: np.ndarray, hyp_rows: np.ndarray, iou_threshold: float = 0.5) -> MotEvaluator:
+    """The :class:`MotEvaluator` fed with every frame of two MOT row tables (see :func:`evaluate_rows`)."""
     last = int(max(gt_rows["frame"].max() if len(gt_rows) else 0, hyp_rows["frame"].max() if len(hyp_rows) else 0))
     evaluator = MotEvaluator(iou_threshold)
     hyp_by_frame = dict(frames(hyp_rows, 1, last))
     for frame, gt in frames(gt_rows, 1, last):
         hyp = hyp_by_frame[frame]
         evaluator.update(frame, gt["id"], boxes(gt), hyp["id"], boxes(hyp))
-    return evaluator.result()
+    return evaluator
+
+
+def reacquisitions(accumulator: motmetrics.MOTAccumulator, min_gap: int) -> tuple[int, int]:
+    """Long hides bridged: (hides, re-acquired). A hide is a gap of at least ``min_gap`` frames in a
+    ground-truth target's annotation (hidden targets are not annotated) with the target matched in
+    its last annotated frame before; it is re-acquired when the first match after the gap has the
+    same track id as that last match before it."""
+    events = accumulator.mot_events
+    events = events[events["Type"].isin(["MATCH", "SWITCH", "MISS"]) & events["OId"].notna()]
+    frame_ids = events.index.get_level_values(0).to_numpy()
+    hides = kept = 0
+    for gt_id in set(events["OId"].astype(float)):
+        mask = (events["OId"].astype(float) == gt_id).to_numpy()
+        order = np.argsort(frame_ids[mask], kind="stable")
+        f = frame_ids[mask][order]
+        hyp = events["HId"].to_numpy()[mask][order]
+        for k in np.flatnonzero(np.diff(f) >= min_gap):
+            before = hyp[k]
+            if before != before:                      # not tracked when it disappeared
+                continue
+            hides += 1
+            after = hyp[k + 1:]
+            after = after[after == after]
+            kept += int(len(after) > 0 and after[0] == before)
+    return hides, kept
