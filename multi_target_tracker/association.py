@@ -40,12 +40,32 @@ Beyond the seed, each selectable (``bench/association.py`` measures each one):
 * ``reacquire_frames``: a target deleted by rule 1 is kept as *lost* this many frames more; a new
   detection near its prediction (within ``reacquire_radius`` box diagonals) re-confirms it with
   its old ID instead of starting a tentative track.
+* Output policy (issue 13). A missed target is *published* (state 2, coasting) only while its
+  prediction is trusted: at most ``coast_output_frames`` misses and a position std
+  ``sqrt(P_xx)`` of at most ``coast_output_std`` box heights. Past that it coasts unpublished
+  (state 4): still predicted and associated, so it comes back with its ID, but not output, so a
+  drifting prediction is not a false positive. Every state stays in :class:`Tracks` (and the
+  node's ``tracks`` table); :meth:`Tracks.visible` is what is published (states 1 and 2).
+* Growing gates (issue 13, ``kalman.missed_update="none"``): a missed target is only predicted,
+  so its covariance and with it the Mahalanobis gate grow with every missed frame, and a target
+  reappearing after a long hide off its constant-velocity path is still inside its own gate. The
+  seed's rule 1 (update with the prediction itself) shrinks the covariance instead: after 10
+  misses the gate is tighter than after one detection, and the target is re-found only if it
+  comes back exactly where predicted.
+* ``cascade``: the first pass in two stages, recently seen targets first, targets coasting
+  unpublished on what they left (DeepSORT's matching cascade, two levels).
+* ``confirm_first_frame``: detections of the first frame of a stream (or after a reset) start
+  confirmed targets (ByteTrack's first-frame activation), so a sequence's first frame is not lost.
+* ``score_scale``: scores are divided by it first (100 for a detector that reports percent); the
+  thresholds ``min_score`` and ``high_score`` are fractions.
 
-Defaults. :func:`seed_config` is seed 003 as written (c_t gate, l_t = 15, no improvement). The
-dataclass defaults are what the benchmark measured best: with the seed's gate every sequence of
-the benchmark scored MOTA near 0 (the matrix-normalised cost of a true pair rarely stays below
-c_t = 0.3 once detections jitter), so the defaults use the Mahalanobis gate, l_t = 4, the IoU term,
-the second pass, and tentative tracks dropped after two misses; f_t = 10 stays the seed's.
+Defaults. :func:`seed_config` is seed 003 as written (c_t gate, l_t = 15, no improvement;
+``config/association_seed.yaml``). With the seed's gate every sequence of the benchmark scored
+MOTA near 0 (the matrix-normalised cost of a true pair rarely stays below c_t = 0.3 once
+detections jitter). The dataclass defaults were chosen by leave-one-sequence-out over TUD-Campus,
+airport-2 and three synthetic UAV scenes (``bench/association.py``, held-out scores in
+``bench/results/association.md``): the Mahalanobis gate, l_t = 2 with first-frame activation,
+the IoU term, the second pass, coasting published at most 2 frames, growing gates, f_t = 40.
 """
 from __future__ import annotations
 
@@ -60,7 +80,12 @@ from aircraft_docking_tracker.config import param, validate
 from multi_target_tracker.kalman import KalmanBank, KalmanConfig
 from multi_target_tracker.motchallenge import box_iou
 
-TENTATIVE, CONFIRMED, COASTING, LOST = 0, 1, 2, 3
+TENTATIVE, CONFIRMED, COASTING, LOST, PREDICTED = 0, 1, 2, 3, 4
+#: What each state means (the ``state`` field of the node's ``tracks`` table).
+STATE_NAMES = {TENTATIVE: "tentative (rule 4, not yet a target)", CONFIRMED: "confirmed (detected this frame)",
+               COASTING: "coasting, published (missed, prediction still trusted)",
+               LOST: "lost (past f_t, kept only for re-acquisition)",
+               PREDICTED: "coasting, not published (missed, prediction no longer trusted; still associated)"}
 #: Cost of a pair that a gate excludes; larger than any real cost so the Hungarian avoids it.
 EXCLUDED = 1e6
 
@@ -73,11 +98,11 @@ class AssociationError(ValueError):
 class AssociationConfig:
     """§3.3 thresholds (seed §4.1 values) and the selectable improvements."""
 
-    max_misses: int = param(10, "f_t: a target is deleted when its missed-frame counter exceeds this (§3.3 rule 1)",
+    max_misses: int = param(40, "f_t: a target is deleted when its missed-frame counter exceeds this (§3.3 rule 1)",
                             low=0, high=100000)
     cost_gate: float = param(0.3, "c_t: an assignment costing more counts as no detection (§3.3 rule 2)",
                              low=0.0, high=10.0)
-    confirm_length: int = param(4, "l_t: a tentative track becomes a target at this many detections (§3.3 rule 4)",
+    confirm_length: int = param(2, "l_t: a tentative track becomes a target at this many detections (§3.3 rule 4)",
                                 low=1, high=100000)
     tentative_max_misses: int = param(1, "a tentative track is dropped when its missed counter exceeds this",
                                       low=0, high=100000)
@@ -85,23 +110,36 @@ class AssociationConfig:
                                 low=0.0, high=100.0)
     still_speed: float = param(1.0, "below this speed [px/s] a target has no direction: θ = 0 for it",
                                low=0.0, high=1e6)
-    min_score: float = param(0.0, "detections scoring below this are ignored", low=-1e9, high=1e9)
+    score_scale: float = param(1.0, "detection scores are divided by this first: 1 for scores in [0, 1], 100 for "
+                               "percent; min_score and high_score are fractions", low=1e-9, high=1e9)
+    min_score: float = param(0.0, "detections scoring below this fraction are ignored", low=0.0, high=1.0)
     max_frame_gap: float = param(5.0, "a stamp jumping forward more than this [s] (or backwards) resets all tracks",
                                  low=0.0, high=1e9)
     default_frame_interval: float = param(1.0 / 30.0, "T [s] used when stamps do not advance", low=1e-6, high=10.0)
     gate: str = param("mahalanobis", "acceptance: 'cost' is c_ij <= c_t (seed rule 2); 'mahalanobis' is "
                       "d² <= mahalanobis_gate with normalisation over the gated pairs only",
                       choices=("cost", "mahalanobis"))
-    mahalanobis_gate: float = param(9.21, "χ² threshold of the Mahalanobis gate (2 dof; 9.21: 99 per cent of true pairs pass)",
+    mahalanobis_gate: float = param(13.8, "χ² threshold of the Mahalanobis gate (2 dof; 9.21: 99 per cent, 13.8: "
+                                    "99.9 per cent of true pairs pass)",
                                     low=0.0, high=1e6)
     iou_weight: float = param(3.0, "weight of (1 - IoU) of predicted box and detection added to the cost",
                               low=0.0, high=100.0)
     second_pass: bool = param(True, "ByteTrack: associate detections scoring below high_score in a second pass")
-    high_score: float = param(0.6, "score splitting first-pass from second-pass detections", low=-1e9, high=1e9)
+    high_score: float = param(0.6, "score (a fraction) splitting first-pass from second-pass detections",
+                              low=0.0, high=1.0)
     reacquire_frames: int = param(0, "frames a deleted target is kept as lost for re-confirmation (0: seed, off)",
                                   low=0, high=100000)
     reacquire_radius: float = param(1.0, "re-confirmation radius around a lost target's prediction [box diagonals]",
                                     low=0.0, high=100.0)
+    coast_output_frames: int = param(2, "a missed target is published (state 2) at most this many frames after "
+                                     "its last detection; then it coasts unpublished (state 4)", low=0, high=100000)
+    coast_output_std: float = param(0.1, "... and only while its position std sqrt(P_xx) is at most this many box "
+                                    "heights (needs kalman.missed_update='none': otherwise P shrinks while coasting)",
+                                    low=0.0, high=1e6)
+    cascade: bool = param(False, "first pass in two stages: targets seen recently first, then those coasting "
+                          "unpublished (state 4) on the detections left (DeepSORT's matching cascade, two levels)")
+    confirm_first_frame: bool = param(True, "detections of the first frame (or the first after a reset) start "
+                                      "confirmed targets (ByteTrack's first-frame activation)")
     history_length: int = param(30, "positions kept per track (trails; tentative history for offline backfill)",
                                 low=1, high=100000)
 
@@ -109,7 +147,8 @@ class AssociationConfig:
 def seed_config(**overrides) -> AssociationConfig:
     """Seed 003 §3 as written: c_t gate on the matrix-normalised cost, l_t = 15, f_t = 10, nothing added."""
     values = dict(gate="cost", cost_gate=0.3, confirm_length=15, max_misses=10, tentative_max_misses=10,
-                  angle_weight=1.0, iou_weight=0.0, second_pass=False, reacquire_frames=0)
+                  angle_weight=1.0, iou_weight=0.0, second_pass=False, reacquire_frames=0, cascade=False,
+                  confirm_first_frame=False, coast_output_frames=100000, coast_output_std=1e6)
     values.update(overrides)
     return validate(AssociationConfig(**values))
 
@@ -135,7 +174,7 @@ class Tracks:
         return Tracks(**{k: v[mask] for k, v in self.__dict__.items()})
 
     def visible(self, include_tentative: bool = False, include_coasting: bool = True) -> "Tracks":
-        """Tracks to show: confirmed, optionally coasting and tentative; lost ones never."""
+        """Tracks to publish: confirmed, optionally trusted coasting and tentative ones; never state 3 or 4."""
         mask = self.states == CONFIRMED
         if include_coasting:
             mask |= self.states == COASTING
@@ -290,6 +329,7 @@ class MultiTargetTracker:
         self.next_id = 1
         self.frame_index = 0
         self.last_stamp: float | None = None
+        self.first_frame = False
         self._clear()
 
     def configure(self, config: AssociationConfig | None = None, kalman: KalmanConfig | None = None) -> None:
@@ -320,12 +360,16 @@ class MultiTargetTracker:
         """Process the detections (x, y, w, h boxes, scores, class ids) of the frame at ``stamp`` [s]."""
         cfg = self.config
         boxes, scores, class_ids = _as_inputs(boxes, scores, class_ids)
+        if cfg.score_scale != 1.0:
+            scores = scores / cfg.score_scale
         ok = valid_detections(boxes, scores)
         rejected = int((~ok).sum())
         ok &= scores >= cfg.min_score
         boxes, scores, class_ids = boxes[ok], scores[ok], class_ids[ok]
 
+        starting = self.last_stamp is None
         T, was_reset = self._frame_interval(stamp)
+        self.first_frame = starting or was_reset
         self.frame_index += 1
         previous = self.bank.positions.copy()          # last estimates: origin of θ's vectors (Fig. 1)
         if len(self.bank) and T > 0:
@@ -340,9 +384,21 @@ class MultiTargetTracker:
         else:
             first, second = np.arange(len(boxes)), np.zeros(0, dtype=np.intp)
 
-        # First association: every active target against the (high-score) detections.
-        t1, d1 = self._associate(active, first, previous, centres, boxes)
-        matched_t, matched_d = [active[t1]], [first[d1]]
+        # First association: every active target against the (high-score) detections; with the
+        # cascade, targets coasting unpublished (wide, growing gates) only get what the others left.
+        if cfg.cascade:
+            recent = active[self.states[active] != PREDICTED]
+            t1, d1 = self._associate(recent, first, previous, centres, boxes)
+            matched_t, matched_d = [recent[t1]], [first[d1]]
+            old = active[self.states[active] == PREDICTED]
+            rest = _without(first, first[d1], len(boxes))
+            t1, d1 = self._associate(old, rest, previous, centres, boxes)
+            matched_t.append(old[t1])
+            matched_d.append(rest[d1])
+            matched_t, matched_d = [np.concatenate(matched_t)], [np.concatenate(matched_d)]
+        else:
+            t1, d1 = self._associate(active, first, previous, centres, boxes)
+            matched_t, matched_d = [active[t1]], [first[d1]]
         # Second association (ByteTrack): targets left over against the low-score detections.
         if len(second):
             left = _without(active, matched_t[0], len(self.bank))
@@ -434,15 +490,23 @@ class MultiTargetTracker:
         return lost[t[accept]], detections[d[accept]]
 
     def _update_states(self, rows: np.ndarray, missed: np.ndarray) -> list:
-        """Rule 4 (tentative → confirmed at l_t hits), coasting on misses, lost after f_t."""
+        """Rule 4 (tentative → confirmed at l_t hits), coasting on misses, lost after f_t.
+
+        A missed target is published as coasting (2) while its prediction is trusted: at most
+        ``coast_output_frames`` misses and position std at most ``coast_output_std`` box heights;
+        past that it coasts unpublished (4), still associated, until rule 1 makes it lost (3).
+        """
         cfg = self.config
         tentative = rows[self.states[rows] == TENTATIVE]
         promoted = tentative[self.hits[tentative] >= cfg.confirm_length]
         self.states[rows[self.states[rows] != TENTATIVE]] = CONFIRMED   # coasting / lost ones re-confirmed
         self.states[promoted] = CONFIRMED
-        coasting = missed[self.states[missed] == CONFIRMED]
-        self.states[coasting] = COASTING
-        gone = missed[(self.states[missed] == COASTING) & (self.misses[missed] > cfg.max_misses)]
+        coasting = missed[np.isin(self.states[missed], (CONFIRMED, COASTING, PREDICTED))]
+        std = np.sqrt(self.bank.cov[coasting, 0])
+        trusted = (self.misses[coasting] <= cfg.coast_output_frames) & \
+            (std <= cfg.coast_output_std * self.bank.size[coasting, 1])
+        self.states[coasting] = np.where(trusted, COASTING, PREDICTED)
+        gone = coasting[self.misses[coasting] > cfg.max_misses]
         self.states[gone] = LOST
         return self.ids[promoted].tolist()
 
@@ -474,7 +538,7 @@ class MultiTargetTracker:
         self.bank.add(boxes)
         self.ids = np.concatenate([self.ids, np.arange(self.next_id, self.next_id + k)])
         self.next_id += k
-        confirmed = self.config.confirm_length <= 1
+        confirmed = self.config.confirm_length <= 1 or (self.config.confirm_first_frame and self.first_frame)
         self.states = np.concatenate([self.states, np.full(k, CONFIRMED if confirmed else TENTATIVE)])
         self.hits = np.concatenate([self.hits, np.ones(k, dtype=np.int64)])
         self.misses = np.concatenate([self.misses, np.zeros(k, dtype=np.int64)])

@@ -4,10 +4,15 @@ Topics (relative names):
 
 * in ``detections`` (``sensor_msgs/PointCloud2``, ``DETECTION_DTYPE`` rows);
 * in ``image`` (``sensor_msgs/Image``), only with ``output.annotate_image``;
-* out ``tracks`` (``PointCloud2``, ``TRACK_DTYPE`` rows: confirmed tracks, coasting ones with
-  ``output.include_coasting``, tentative ones with ``output.include_tentative``; velocities in px/s);
-* out ``tracks/image_markers`` (``visualization_msgs/ImageMarker``: boxes and trails coloured by id, one overlay);
-* out ``tracks/markers`` (legacy ``visualization_msgs/MarkerArray`` in pixels: boxes, ids, short trails);
+* out ``tracks`` (``PointCloud2``, ``TRACK_DTYPE`` rows, velocities in px/s): every track the core
+  holds, with its ``state``: 0 tentative, 1 confirmed (detected in this frame), 2 coasting and
+  published (its prediction still trusted), 3 lost (kept for re-acquisition), 4 coasting unpublished
+  (prediction no longer trusted). The published targets are states 1 and 2 (``evaluate`` scores
+  those by default); a consumer filters on ``state``;
+* out ``tracks/image_markers`` (``visualization_msgs/ImageMarker``: boxes and trails coloured by id, one
+  overlay) and ``tracks/markers`` (legacy ``visualization_msgs/MarkerArray`` in pixels: boxes, ids, short
+  trails), both of the published targets (plus tentative ones with ``output.include_tentative``;
+  without ``output.include_coasting`` only state 1);
 * out ``tracks/image`` (``sensor_msgs/Image`` bgr8, the image with the tracks drawn), only with
   ``output.annotate_image``.
 
@@ -43,8 +48,8 @@ _IMAGE_BUFFER = 30
 class AssociationOutputConfig:
     """What the node publishes (set at start-up; topics do not change at runtime)."""
 
-    include_tentative: bool = param(False, "also publish tentative tracks (state 0)")
-    include_coasting: bool = param(True, "also publish confirmed tracks coasting on prediction (state 2)")
+    include_tentative: bool = param(False, "also draw tentative tracks (state 0) in tracks/markers and tracks/image")
+    include_coasting: bool = param(True, "draw trusted coasting tracks (state 2) in tracks/markers and tracks/image")
     trail_length: int = param(20, "trail points per track in tracks/markers", low=0, high=1000)
     annotate_image: bool = param(False, "subscribe to image and publish tracks/image with the tracks drawn "
                                  "(start-up only)", read_only=True)
@@ -129,15 +134,15 @@ class AssociationProcessor(MessageProcessor):
             self.resets += 1
             self.report_event("detections: stamp jumped; the tracks were reset (new ids keep counting up)")
         shown = result.tracks.visible(self.output.include_tentative, self.output.include_coasting)
-        self._shown = len(shown)
-        table = tracks_to_table(shown)
+        self._shown = len(result.tracks.visible())
+        drawn = tracks_to_table(shown)
         trails = self._trails(shown.ids)
-        out = [("tracks", table_to_cloud(table, msg.header)),
-               ("tracks/markers", boxes_to_markers(table, msg.header, "tracks", label_field="id", trails=trails)),
-               ("tracks/image_markers", boxes_to_image_marker(table, msg.header, "tracks", label_field="id",
+        out = [("tracks", table_to_cloud(tracks_to_table(result.tracks), msg.header)),
+               ("tracks/markers", boxes_to_markers(drawn, msg.header, "tracks", label_field="id", trails=trails)),
+               ("tracks/image_markers", boxes_to_image_marker(drawn, msg.header, "tracks", label_field="id",
                                                               trails=trails))]
         if self.output.annotate_image:
-            out += self._annotate(stamp, table)
+            out += self._annotate(stamp, drawn)
         return out
 
     def _trails(self, ids) -> dict:
@@ -187,7 +192,7 @@ class AssociationProcessor(MessageProcessor):
     def status(self) -> dict:
         states = self.tracker.states
         return {"tracks published": self._shown, "tracks tentative": int((states == 0).sum()),
-                "tracks confirmed": int(((states == 1) | (states == 2)).sum()),
+                "tracks confirmed": int(np.isin(states, (1, 2, 4)).sum()),
                 "invalid detection rows": self.invalid_detections, "track resets": self.resets,
                 "next id": self.tracker.next_id}
 

@@ -12,8 +12,13 @@ on every update (``w ← w + β (w_det − w)``, same for ``h``), and kept while
 The seed gives no noise values. Both noises may grow with the target's apparent size (a choice of
 ours, as in DeepSORT / ByteTrack): ``σ_i = acceleration_noise + acceleration_noise_per_px · h_i`` and
 ``r_i = measurement_noise + measurement_noise_per_px · h_i``, with ``h_i`` the smoothed box height;
-the defaults (measured in ``bench/association.py`` on pedestrians 100-300 px tall and aircraft and
-vehicles 12-140 px) are mostly the size-proportional terms.
+the defaults (chosen leave-one-sequence-out in ``bench/association.py`` on pedestrians 100-300 px
+tall and aircraft and vehicles 12-140 px) are purely size-proportional for the acceleration, so the
+same setting holds at every scale.
+
+A frame without detection: the seed's rule 1 updates the filter with its own prediction, which
+shrinks P as if a measurement had arrived; ``missed_update="none"`` (the default) only predicts,
+so P, and the Mahalanobis gate built on it, grows while a target is hidden (issue 13).
 
 All targets live in one :class:`KalmanBank` of stacked arrays, so a frame of a thousand targets
 is a few vector operations. With F, G, H of eq. 6 and R = r² I the x and y axes never mix and
@@ -38,16 +43,17 @@ H = np.array([[1.0, 0.0, 0.0, 0.0],
 class KalmanConfig:
     """Noise model of eqs. 5-6 (the seed gives no numbers; the defaults are measured, see the module)."""
 
-    acceleration_noise: float = param(50.0, "σ of the acceleration a_x, a_y ~ N(0, σ²) of eq. 5 [px/s²]",
+    acceleration_noise: float = param(0.0, "σ of the acceleration a_x, a_y ~ N(0, σ²) of eq. 5 [px/s²]",
                                       low=0.0, high=1e6)
-    acceleration_noise_per_px: float = param(12.0, "σ added per pixel of box height [1/s²]", low=0.0, high=1e4)
+    acceleration_noise_per_px: float = param(2.0, "σ added per pixel of box height [1/s²]", low=0.0, high=1e4)
     measurement_noise: float = param(0.5, "std of the measured centre, v_k of eq. 5 [px]", low=0.0, high=1e4)
     measurement_noise_per_px: float = param(0.05, "measurement std added per pixel of box height", low=0.0, high=10.0)
     initial_velocity_std: float = param(100.0, "std of the unknown velocity of a new target [px/s]",
                                         low=0.0, high=1e5)
     size_gain: float = param(0.8, "β: weight of a new detection's w, h in the smoothed box size", low=0.0, high=1.0)
-    missed_update: str = param("prediction", "a frame without detection: 'prediction' updates the filter with "
-                               "its own prediction (seed §3.3 rule 1), 'none' only predicts",
+    missed_update: str = param("none", "a frame without detection: 'none' only predicts (the covariance and the "
+                               "gate grow while a target is missed), 'prediction' updates the filter with its own "
+                               "prediction (seed §3.3 rule 1: the covariance shrinks)",
                                choices=("prediction", "none"))
 
     def validate(self) -> None:

@@ -1,16 +1,21 @@
 """``mot_track``: the association core over a MOTChallenge ``det.txt``, writing MOTChallenge results.
 
     mot_track DET.txt -o results.txt [--fps 25 | --seqinfo seqinfo.ini] [--min-score 0.3] [--gt gt.txt]
+              [--score-scale 100]
               [--no-coasting] [--backfill] [--params config/association.yaml] [--gate cost ...]
 
 The very same :class:`MultiTargetTracker` as ``association_node``; every parameter of
 ``config/association.yaml`` is also an option (``--max-misses``, ``--kalman-acceleration-noise``,
 ...). Frame ``k`` has the stamp ``(k - 1) / fps``. With ``--gt`` the MOT metrics are printed, and
-seed 003's Fig. 4 measure (frames of continuous tracking per ground-truth target).
-By default the output is what the live node publishes (confirmed and coasting tracks);
+seed 003's Fig. 4 measure (frames of continuous tracking per ground-truth target), and HOTA.
+Scores: thresholds (``--min-score``, ``--high-score``) are fractions; a file whose scores go above 1
+(and not above 100) is read as percent unless ``--score-scale`` is given. A ``seqinfo.ini`` that
+disagrees with the detections (``seqLength`` shorter, boxes outside the image) is reported; every
+frame of the data is tracked.
+By default the output is what the live node publishes (confirmed tracks and coasting ones while their
+prediction is trusted: states 1 and 2);
 ``--no-coasting`` drops coasting ones, ``--backfill`` adds a confirmed track's tentative frames
-(offline only). Seed 003 as written: ``--gate cost --confirm-length 15 --tentative-max-misses 10
---iou-weight 0 --second-pass false``.
+(offline only). Seed 003 as written: ``--params config/association_seed.yaml``.
 """
 from __future__ import annotations
 
@@ -106,7 +111,14 @@ def main(argv=None) -> int:
         fps = args.fps or info.get("frameRate") or 30.0
         assoc, kalman = configs_from(args)
         detections = mc.read_detections(args.det, max_frame=args.max_frame)
-        last = info.get("seqLength") or (int(detections["frame"].max()) if len(detections) else 0)
+        if args.score_scale is None:                       # not declared: detected from the file
+            assoc.score_scale = mc.score_scale_of(detections["score"])
+            if assoc.score_scale != 1.0:
+                print(f"mot_track: {args.det} has scores up to {detections['score'].max():g}: read as percent "
+                      "(--score-scale 100; min_score and high_score are fractions)", file=sys.stderr)
+        for warning in mc.seqinfo_disagreements(info, detections):
+            print(f"mot_track: warning: {warning}", file=sys.stderr)
+        last = max(info.get("seqLength") or 0, int(detections["frame"].max()) if len(detections) else 0)
         if args.gt:
             gt = mc.read_ground_truth(args.gt, max_frame=args.max_frame)
             last = max(last, int(gt["frame"].max()) if len(gt) else 0)
@@ -130,7 +142,8 @@ def main(argv=None) -> int:
         if args.json:
             print(json.dumps(scores.as_dict(with_continuity=True), indent=1))
         else:
-            print(f"MOTA {100 * scores.mota:.1f}  MOTP {100 * scores.motp:.1f}  IDF1 {100 * scores.idf1:.1f}  "
+            print(f"HOTA {100 * scores.hota:.1f}  DetA {100 * scores.deta:.1f}  AssA {100 * scores.assa:.1f}  "
+                  f"MOTA {100 * scores.mota:.1f}  MOTP {100 * scores.motp:.1f}  IDF1 {100 * scores.idf1:.1f}  "
                   f"IDSW {scores.num_switches}  FRAG {scores.num_fragmentations}  MT {scores.mostly_tracked}  "
                   f"ML {scores.mostly_lost}  FP {scores.num_false_positives}  FN {scores.num_misses}")
             print("seed 003 Fig. 4 (frames of continuous tracking per target): " + ", ".join(

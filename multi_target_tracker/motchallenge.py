@@ -147,6 +147,45 @@ def read_seqinfo(path: str | Path) -> dict:
     return info
 
 
+def seqinfo_disagreements(info: dict, rows: np.ndarray, what: str = "det.txt") -> list[str]:
+    """Where a ``seqinfo.ini`` (:func:`read_seqinfo`) contradicts the rows of a MOTChallenge file.
+
+    Checked: ``seqLength`` against the last frame, ``imWidth`` / ``imHeight`` against the boxes
+    (a box lying wholly outside the image). An empty list when they agree or nothing is given.
+    """
+    out = []
+    if not len(rows):
+        return out
+    last = int(rows["frame"].max())
+    length = info.get("seqLength")
+    if length is not None and last > length:
+        beyond = int((rows["frame"] > length).sum())
+        out.append(f"seqinfo.ini says seqLength={length} but {what} has frames up to {last} "
+                   f"({beyond} rows after frame {length}); every frame of the data is used")
+    width, height = info.get("imWidth"), info.get("imHeight")
+    if width and height:
+        outside = (rows["x"] >= width) | (rows["y"] >= height) | (rows["x"] + rows["w"] <= 0) | \
+            (rows["y"] + rows["h"] <= 0)
+        if outside.any():
+            out.append(f"seqinfo.ini says the image is {width}x{height} but {int(outside.sum())} boxes of {what} "
+                       f"lie wholly outside it")
+    return out
+
+
+def score_scale_of(scores: np.ndarray) -> float:
+    """What detection scores are out of: 1 for fractions (all finite scores in [0, 1]), 100 for percent
+    (some above 1, none above 100). Raises :class:`MotFormatError` for anything else (negative
+    or above 100), which the caller must declare."""
+    scores = np.asarray(scores, dtype=np.float64)
+    scores = scores[np.isfinite(scores)]
+    if not len(scores) or (scores.min() >= 0 and scores.max() <= 1):
+        return 1.0
+    if scores.min() >= 0 and scores.max() <= 100:
+        return 100.0
+    raise MotFormatError(f"detection scores from {scores.min():g} to {scores.max():g} are neither fractions nor "
+                         "percent: declare their scale (--score-scale)")
+
+
 def make_rows(frame: int, ids: np.ndarray, xywh: np.ndarray, scores: np.ndarray | None = None) -> np.ndarray:
     """Build ``MOT_ROW_DTYPE`` rows for one frame from ids and ``(N, 4)`` boxes (results, tests)."""
     xywh = np.asarray(xywh, dtype=np.float64).reshape(-1, 4)

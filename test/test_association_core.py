@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from multi_target_tracker.association import (COASTING, CONFIRMED, LOST, TENTATIVE, AssociationConfig,
+from multi_target_tracker.association import (COASTING, CONFIRMED, LOST, PREDICTED, TENTATIVE, AssociationConfig,
                                               AssociationError, MultiTargetTracker, all_pairs, angles, gated_pairs,
                                               hungarian, mahalanobis_squared, normalise_by_max, pad_square,
                                               seed_config, seed_cost)
@@ -180,7 +180,9 @@ def test_defaults_are_the_measured_improvements_and_seed_preset_is_the_seed():
     seed, default = seed_config(), AssociationConfig()
     assert (seed.gate, seed.cost_gate, seed.confirm_length, seed.max_misses) == ("cost", 0.3, 15, 10)
     assert not seed.second_pass and seed.iou_weight == 0 and seed.reacquire_frames == 0
-    assert default.gate == "mahalanobis" and default.max_misses == 10
+    assert not (seed.cascade or seed.confirm_first_frame) and seed.coast_output_frames > seed.max_misses
+    assert default.gate == "mahalanobis" and default.max_misses == 40 and default.coast_output_frames == 2
+    assert KalmanConfig().missed_update == "none"               # growing gates (issue 13)
 
 
 def test_lone_target_needs_absolute_gate():
@@ -263,3 +265,81 @@ def test_empty_frames_coast_then_delete():
     states = [tracker.step((3 + k) / FPS, np.zeros((0, 4))).tracks.states.tolist() for k in range(3)]
     assert states[0] == [COASTING] * 3 and states[1] == [COASTING] * 3
     assert states[2] == []                                      # 3 misses > f_t = 2: all deleted
+
+
+# -- output policy, growing gates, score scale (issue 13) -------------------------------------
+def _walker(frames_seen, hide, frames_after, speed=40.0, y=100.0):
+    """One target moving right at ``speed`` px/s, detected, hidden ``hide`` frames, detected again."""
+    seq = [[box(20 + speed * k / FPS, y)] for k in range(frames_seen)]
+    seq += [[] for _ in range(hide)]
+    k0 = frames_seen + hide
+    seq += [[box(20 + speed * (k0 + k) / FPS, y)] for k in range(frames_after)]
+    return seq
+
+
+def test_coasting_is_published_only_while_trusted_and_every_state_is_kept():
+    cfg = AssociationConfig(coast_output_frames=2, coast_output_std=1e6, max_misses=30)
+    results = run(MultiTargetTracker(cfg, KalmanConfig(missed_update="none")), _walker(6, 5, 3))
+    assert [state_of(r, 1) for r in results[6:11]] == [COASTING, COASTING, PREDICTED, PREDICTED, PREDICTED]
+    assert [len(r.tracks.visible()) for r in results[6:11]] == [1, 1, 0, 0, 0]   # published: states 1, 2
+    assert len(results[9].tracks) == 1                                           # but still held
+    assert state_of(results[11], 1) == CONFIRMED and len(results[11].tracks.visible()) == 1   # same id back
+    # the uncertainty test alone: a tight std bound stops publication before the frame limit
+    tight = AssociationConfig(coast_output_frames=100, coast_output_std=0.01, max_misses=30)
+    results = run(MultiTargetTracker(tight, KalmanConfig(missed_update="none")), _walker(6, 3, 0))
+    assert state_of(results[6], 1) == PREDICTED
+
+
+def test_coasting_gate_grows_without_collapsing():
+    # kalman.missed_update='none': the innovation variance grows with every missed frame; the seed's
+    # update with its own prediction makes it shrink (the gate that shut out reappearing targets).
+    for mode, grows in (("none", True), ("prediction", False)):
+        tracker = MultiTargetTracker(AssociationConfig(max_misses=50), KalmanConfig(missed_update=mode))
+        run(tracker, _walker(8, 0, 0))
+        s = []
+        for k in range(10):
+            tracker.step((8 + k) / FPS, np.zeros((0, 4)))
+            s.append(float(tracker.bank.innovation_variance()[0]))
+        assert (np.diff(s) > 0).all() == grows
+        assert (s[-1] > 4 * s[0]) == grows
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_reacquired_after_long_hide_with_a_speed_change(seed):
+    # A target hidden 40 frames (4 s) reappears 30-45 px off its constant-velocity prediction:
+    # with growing gates it gets its old id back; with the collapsed covariance it is a new target.
+    rng = np.random.default_rng(seed)
+    offset = rng.uniform(30.0, 45.0)
+    seen = [[box(20 + 40.0 * k / FPS, 100)] for k in range(10)]
+    after = [[box(20 + 40.0 * (50 + k) / FPS + offset, 100 + rng.normal(0, 0.5))] for k in range(5)]
+    frames = seen + [[] for _ in range(40)] + after
+    ids = {}
+    for mode in ("none", "prediction"):
+        results = run(MultiTargetTracker(AssociationConfig(max_misses=80), KalmanConfig(missed_update=mode)), frames)
+        ids[mode] = results[-1].tracks.visible().ids.tolist()
+    assert ids["none"] == [1]
+    assert ids["prediction"] != [1]
+
+
+def test_percent_scores_with_score_scale_match_fractions():
+    rng = np.random.default_rng(3)
+    frames = [np.array([box(20 + 4 * k, 50), box(200, 80 + 2 * k)]) for k in range(12)]
+    scores = [rng.uniform(0.3, 0.95, 2) for _ in range(12)]
+    cfg = dict(min_score=0.4, high_score=0.6)
+    fraction = MultiTargetTracker(AssociationConfig(**cfg))
+    percent = MultiTargetTracker(AssociationConfig(**cfg, score_scale=100.0))
+    raw = MultiTargetTracker(AssociationConfig(**cfg))                       # percent read as fractions
+    for k, (b, s) in enumerate(zip(frames, scores)):
+        a = fraction.step(k / FPS, b, s).tracks
+        p = percent.step(k / FPS, b, 100 * s).tracks
+        r = raw.step(k / FPS, b, 100 * s).tracks
+        assert a.ids.tolist() == p.ids.tolist() and np.allclose(a.boxes, p.boxes) and np.allclose(a.scores, p.scores)
+    assert len(a.visible()) and (r.scores > 1).all()                         # thresholds defeated without it
+
+
+def test_first_frame_detections_start_confirmed():
+    frames = [[box(20, 50), box(200, 50)], [box(24, 50), box(204, 50)], [box(28, 50), box(208, 50), box(400, 90)]]
+    on = run(MultiTargetTracker(AssociationConfig(confirm_first_frame=True, confirm_length=3)), frames)
+    off = run(MultiTargetTracker(AssociationConfig(confirm_first_frame=False, confirm_length=3)), frames)
+    assert len(on[0].tracks.visible()) == 2 and len(off[0].tracks.visible()) == 0
+    assert state_of(on[2], 3) == TENTATIVE                      # later newcomers still need l_t detections

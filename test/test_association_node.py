@@ -131,7 +131,29 @@ def test_node_in_process_over_detection_messages_and_bag(tmp_path):
             last = cloud_to_table(got[-1], TRACK_DTYPE)
             assert sorted(last["id"].tolist()) == [1, 2]
             assert got[-1].header.stamp == header(5).stamp and got[-1].header.frame_id == "uav_cam"
-            assert len(cloud_to_table(got[0], TRACK_DTYPE)) == 0            # tentative tracks hidden
+            first = cloud_to_table(got[0], TRACK_DTYPE)
+            assert sorted(first["id"].tolist()) == [1, 2] and (first["state"] == 1).all()   # confirm_first_frame
         finally:
             node.destroy_node()
             probe.destroy_node()
+
+
+def test_tracks_table_keeps_every_state_and_markers_show_the_published():
+    proc = AssociationProcessor(AssociationConfig(confirm_first_frame=False, confirm_length=3))
+    out = dict(proc.process("detections", detections_msg(0)))
+    table = cloud_to_table(out["tracks"], TRACK_DTYPE)
+    assert sorted(table["id"].tolist()) == [1, 2] and (table["state"] == 0).all()     # tentative, in the table
+    assert proc.status()["tracks published"] == 0
+    assert len(out["tracks/markers"].markers) == 1                                   # only the delete-all
+
+
+def test_seed_yaml_is_seed_config():
+    from aircraft_docking_tracker.config import from_mapping  # noqa: PLC0415
+    from multi_target_tracker.association import seed_config  # noqa: PLC0415
+
+    params = load_yaml_parameters(package_config_dir() / "association_seed.yaml", "association")
+    assoc = from_mapping(AssociationConfig, {k: v for k, v in params.items() if "." not in k})
+    kalman = from_mapping(KalmanConfig, {k[len("kalman."):]: v for k, v in params.items() if k.startswith("kalman.")})
+    assert assoc == seed_config()
+    assert kalman.missed_update == "prediction"          # §3.3 rule 1: a missed target is updated with its prediction
+    assert kalman.acceleration_noise_per_px == 0.0 and kalman.measurement_noise_per_px == 0.0

@@ -74,6 +74,7 @@ def test_mot_hidden_ground_truth_is_ignored(tmp_path):
     hyp = [_table({5: A}), _table({5: A})]                           # the tracker coasts on it: no FP
     r = ev.evaluate_bags(_write(tmp_path / "h.mcap", {m.GROUND_TRUTH: gt, m.TRACKS: hyp}))["mot"]
     assert r["num_false_positives"] == 0 and r["num_misses"] == 0 and r["mota"] == pytest.approx(1.0)
+    assert r["hota"] == pytest.approx(1.0) and r["assa"] == pytest.approx(1.0)   # HOTA beside CLEAR MOT
 
 
 def test_sot_from_bags_shift_and_missing_output(tmp_path):
@@ -139,7 +140,7 @@ def test_cli_writes_table_json_and_plots(tmp_path, capsys):
     rep = tmp_path / "report"
     assert ev.main([str(bag), str(sot), "--report", str(rep), "--quiet"]) == 0
     text = capsys.readouterr().out
-    assert "MOTA" in text and "AUC" in text
+    assert "MOTA" in text and "HOTA" in text and "AUC" in text
     data = json.loads((rep / "report.json").read_text())
     assert data["mot"]["mot"]["mota"] == pytest.approx(0.5)
     assert data["sot"]["sot"]["lost_frames"] == 1

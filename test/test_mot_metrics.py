@@ -93,3 +93,37 @@ def test_ground_truth_flag_zero_ignored(tmp_path):
     path.write_text("1,1,0,0,10,10,1,1,1\n1,2,0,0,10,10,0,1,1\n2,1,0,0,10,10,1,1,1\n")
     gt = mc.read_ground_truth(path)
     assert gt["id"].tolist() == [1, 1]
+
+
+def test_hota_of_hand_made_case_pinned_to_trackeval():
+    # Values printed by TrackEval 1.3.0 (trackeval.metrics.HOTA().eval_sequence, means over the 19 α)
+    # for the same four frames, IoU similarities; the port must reproduce them.
+    s = _hand_made_case().result()
+    assert s.hota == pytest.approx(0.4789746250470161, abs=1e-12)
+    assert s.deta == pytest.approx(0.7216374269005847, abs=1e-12)
+    assert s.assa == pytest.approx(0.3182957393483709, abs=1e-12)
+    assert s.loca == pytest.approx(0.9674185463659147, abs=1e-12)
+
+
+def test_hota_properties():
+    from aircraft_docking_tracker.evaluation.mot_metrics import HotaAccumulator
+
+    rng = np.random.default_rng(0)
+    boxes = rng.uniform(0, 500, (5, 4)) + [0, 0, 20, 20]
+    perfect, renamed, empty = HotaAccumulator(), HotaAccumulator(), HotaAccumulator()
+    for _ in range(10):
+        sim = mc.iou_matrix(boxes, boxes)
+        perfect.update(np.arange(5), np.arange(5), sim)
+        renamed.update(np.arange(5), np.arange(5) + 100, sim)      # ids are only labels
+        empty.update(np.arange(5), [], np.zeros((5, 0)))
+    assert perfect.result() == pytest.approx(dict(hota=1.0, deta=1.0, assa=1.0, loca=1.0))
+    assert renamed.result() == perfect.result()
+    assert empty.result()["hota"] == 0.0 and empty.result()["deta"] == 0.0
+    # one id split in two halves: detection perfect, association halved for that target
+    split = HotaAccumulator()
+    for t in range(10):
+        split.update([1], [1 if t < 5 else 2], [[1.0]])
+    r = split.result()
+    assert r["deta"] == pytest.approx(1.0)
+    assert r["assa"] == pytest.approx(0.5)
+    assert r["hota"] == pytest.approx(np.sqrt(0.5))

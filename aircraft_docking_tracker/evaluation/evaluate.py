@@ -10,7 +10,7 @@ The metric family follows from the topics present (output / ground truth):
 * ``docking/polygon`` vs ``ground_truth/polygon`` -> single target (``sot_metrics``: OTB success
   AUC, precision at 20 px, lost frames; polygon IoU; nose error when ``ground_truth/stand`` and
   ``ground_truth/nose`` are there);
-* ``tracks`` vs ``ground_truth`` (rows with ``id``) -> multi target (``mot_metrics``: MOTA, MOTP,
+* ``tracks`` vs ``ground_truth`` (rows with ``id``) -> multi target (``mot_metrics``: HOTA, DetA, AssA, MOTA, MOTP,
   IDF1, ID switches, fragmentations, MT/ML, seed 003 Fig. 4 continuity);
 * ``detections`` vs ``ground_truth`` -> detection (``detection_metrics``: seed 003 Table 1 rates,
   PR curve, AP);
@@ -68,7 +68,8 @@ class EvaluateConfig:
     lost_iou: float = param(0.0, "single target: a frame is lost when IoU <= this", low=0.0, high=1.0)
     missing: str = param("hold", "single target: a frame with no output holds the last one, or counts as lost",
                          choices=("hold", "lost"))
-    track_states: str = param("1,2", "track states scored (0 tentative, 1 confirmed, 2 coasting, 3 lost)")
+    track_states: str = param("1,2", "track states scored (0 tentative, 1 confirmed, 2 coasting published, 3 lost, "
+                              "4 coasting unpublished); 1,2: what the association node publishes")
     hidden_below: float = param(0.3, "ground-truth rows whose visible fraction (score) is below this are ignored",
                                 low=0.0, high=1.0)
     namespace: str = param("", "camera namespace of the topics (e.g. cam0); empty: the one there is")
@@ -77,7 +78,7 @@ class EvaluateConfig:
         try:
             self.states()
         except ValueError:
-            raise EvaluationError(f"track_states={self.track_states!r}: a comma-separated list of 0..3") from None
+            raise EvaluationError(f"track_states={self.track_states!r}: a comma-separated list of 0..4") from None
 
     def states(self) -> list[int]:
         return [int(s) for s in self.track_states.split(",") if s.strip()]

@@ -15,7 +15,8 @@ COLUMNS = {
             ("lost_frames", "lost", "{:d}"), ("longest_loss", "max loss", "{:d}"),
             ("nose_error_median", "nose px", "{:.1f}"), ("stop_error_m", "stop err m", "{:.2f}"),
             ("missing_outputs", "no output", "{:d}")],
-    "mot": [("num_frames", "frames", "{:d}"), ("mota", "MOTA", "{:.3f}"), ("motp", "MOTP", "{:.3f}"),
+    "mot": [("num_frames", "frames", "{:d}"), ("hota", "HOTA", "{:.3f}"), ("deta", "DetA", "{:.3f}"),
+            ("assa", "AssA", "{:.3f}"), ("mota", "MOTA", "{:.3f}"), ("motp", "MOTP", "{:.3f}"),
             ("idf1", "IDF1", "{:.3f}"), ("num_switches", "IDSW", "{:d}"), ("num_fragmentations", "Frag", "{:d}"),
             ("mostly_tracked", "MT", "{:d}"), ("mostly_lost", "ML", "{:d}"), ("num_false_positives", "FP", "{:d}"),
             ("num_misses", "FN", "{:d}"), ("num_unique_objects", "GT ids", "{:d}")],
@@ -25,7 +26,7 @@ COLUMNS = {
     "speed": [("count", "msgs", "{:d}"), ("rate_hz", "rate Hz", "{:.2f}"), ("p50_ms", "lat p50 ms", "{:.1f}"),
               ("p95_ms", "p95 ms", "{:.1f}"), ("p99_ms", "p99 ms", "{:.1f}")],
 }
-TITLES = {"sot": "single target (OTB)", "mot": "multi target (CLEAR MOT / IDF1)",
+TITLES = {"sot": "single target (OTB)", "mot": "multi target (HOTA / CLEAR MOT / IDF1)",
           "detection": "detection (seed 003 Table 1)", "speed": "speed (per output topic)"}
 
 
