@@ -58,7 +58,7 @@ def test_summary_md_has_every_table_with_numbers(tmp_path):
     recording = write_recording(tmp_path / "recording.mcap")
     results = demo.report(recording, {}, tmp_path)
     text = (tmp_path / "report" / "summary.md").read_text()
-    for heading in ("## /stand", "## /uav", "single target (OTB)", "multi target (CLEAR MOT / IDF1)",
+    for heading in ("## /stand", "## /uav", "single target (OTB)", "multi target (HOTA / CLEAR MOT / IDF1)",
                     "detection (seed 003 Table 1)", "speed (per output topic)", "## Nodes"):
         assert heading in text, heading
     rows = table_rows(text)
