@@ -17,11 +17,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import struct
 import sys
 import time
 import tracemalloc
-import zlib
 from pathlib import Path
 
 import cv2
@@ -34,6 +32,7 @@ from aircraft_docking_tracker.bag import ns_to_stamp  # noqa: E402
 from aircraft_docking_tracker.images import _check_png_chunks, compressed_dimensions  # noqa: E402
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, table_to_cloud  # noqa: E402
 from aircraft_docking_tracker.processing import ProcessingStats, process_guarded  # noqa: E402
+from aircraft_docking_tracker.scenarios.faults import png_bomb  # noqa: E402
 from multi_target_tracker.association_node import AssociationNodeConfig, AssociationProcessor  # noqa: E402
 
 
@@ -65,13 +64,6 @@ def association_case(limit: int, frames: int, seed: int) -> dict:
             "tracks": int(processor.tracker.states.size)}
 
 
-def png_bomb(width: int, height: int) -> bytes:
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    z = zlib.compressobj(9)
-    body = b"".join(z.compress(b"\0" * (width + 1)) for _ in range(height)) + z.flush()
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
-            + chunk(b"IDAT", body) + chunk(b"IEND", b""))
 
 
 def rss_mb() -> float:

@@ -21,7 +21,6 @@ import os
 import resource
 import struct
 import time
-import zlib
 
 import cv2
 import numpy as np
@@ -33,6 +32,7 @@ from std_msgs.msg import Header
 
 from aircraft_docking_tracker import docking_tracker_node
 from aircraft_docking_tracker.bag import ns_to_stamp
+from aircraft_docking_tracker.scenarios import faults
 from aircraft_docking_tracker.config import ConfigError, from_mapping
 from aircraft_docking_tracker.images import LAYOUTS, ENCODINGS
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, table_to_cloud
@@ -207,14 +207,7 @@ class Inputs:
 BOMB_SIZES = [(3500, 3000), (6000, 5000)]    # 10.5 and 30 MP of zeros, some ten kB each
 
 
-@functools.lru_cache(maxsize=None)
-def png_bomb(width: int, height: int) -> bytes:
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    z = zlib.compressobj(9)
-    body = b"".join(z.compress(b"\0" * (width + 1)) for _ in range(height)) + z.flush()
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
-            + chunk(b"IDAT", body) + chunk(b"IEND", b""))
+png_bomb = functools.lru_cache(maxsize=None)(faults.png_bomb)
 
 
 def message_for(inputs: Inputs, type_name: str):

@@ -8,7 +8,6 @@ import subprocess
 import sys
 import time
 import tracemalloc
-import zlib
 from pathlib import Path
 
 import cv2
@@ -26,6 +25,7 @@ from aircraft_docking_tracker.docking_tracker_node import DockingProcessor, Dock
 from aircraft_docking_tracker.images import ImageConversionError, compressed_dimensions, numpy_to_image, to_mono8
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
 from aircraft_docking_tracker.processing import MessageProcessor, ProcessingStats, process_guarded
+from aircraft_docking_tracker.scenarios.faults import png_bomb
 from multi_target_tracker import motchallenge as mc
 from multi_target_tracker.association_node import AssociationProcessor
 from multi_target_tracker.cascade import Cascade, CascadeError
@@ -239,17 +239,6 @@ def test_the_image_thread_survives_a_raising_handler():
 
 
 # ---------------------------------------------------------------- 3. bounds on work
-def png_bomb(width: int, height: int) -> bytes:
-    """A grey PNG of ``width`` x ``height`` zeros, compressed row by row (small file, huge image)."""
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    z = zlib.compressobj(9)
-    row = b"\0" * (width + 1)
-    body = b"".join(z.compress(row) for _ in range(height)) + z.flush()
-    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", body) + chunk(b"IEND", b"")
-
-
 def test_a_png_decompression_bomb_is_refused_from_its_header():
     data = png_bomb(6000, 6000)                       # 36 MP of zeros in a file of some ten kB
     assert len(data) < 200_000 and compressed_dimensions(data) == ("png", 6000, 6000)
