@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from aircraft_docking_tracker.config import param
-from multi_target_tracker.features import FEATURE_SETS, FUSED_DIM, feature_range
+from multi_target_tracker.features import FEATURE_SETS, FUSED_DIM, PackedStages, feature_range
 
 MODEL_FORMAT = "aircraft_docking_tracker/boosted-cascade"
 MODEL_VERSION = 1
@@ -86,28 +86,6 @@ class Stage:
         if stage.features.min() < 0 or stage.features.max() >= FUSED_DIM:
             raise CascadeError(f"feature index outside 0..{FUSED_DIM - 1}")
         return stage
-
-
-@dataclass(frozen=True)
-class PackedStages:
-    """All stages' stumps in flat arrays (what the compiled window loop reads): stage s holds stumps
-    ``ends[s-1] .. ends[s]-1`` and passes when their sum reaches ``stage_thresholds[s]``."""
-
-    features: np.ndarray
-    thresholds: np.ndarray
-    left: np.ndarray
-    right: np.ndarray
-    ends: np.ndarray
-    stage_thresholds: np.ndarray
-
-    @classmethod
-    def of(cls, stages: list[Stage]) -> "PackedStages":
-        def flat(name, dtype):
-            return np.ascontiguousarray(np.concatenate([getattr(s, name) for s in stages]) if stages
-                                        else np.zeros(0), dtype)
-        return cls(flat("features", np.int64), flat("thresholds", np.int64), flat("left", np.float64),
-                   flat("right", np.float64), np.cumsum([len(s.features) for s in stages], dtype=np.int64),
-                   np.asarray([s.threshold for s in stages], np.float64).reshape(-1))
 
 
 @dataclass
