@@ -137,6 +137,7 @@ ALL_PREFIXES = tuple(p for fold in FOLDS for p in fold)
 # x 3 feature sets fit in a bench run: fewer positives, stages and negatives per stage.
 FOLD_TRAIN_ARGS = ["--window", "64", "32", "--rotate90", "--flips", "hv", "--max-positives", "3000",
                    "--stages", "12", "--negatives", "2000"]
+QUICK_FOLD_ARGS = ["--max-positives", "1000", "--stages", "6", "--negatives", "1000"]   # --quick: a smoke run
 RECIPES = {"seed": [],                                              # the shipped recipe, made cheaper
            "photometric": ["--photometric", "0.6"],                   # + grey-level augmentation of the copies
            "negatives": ["--negatives", "4000", "--stages", "16"]}    # + more, harder negatives (deeper cascade)
@@ -219,7 +220,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
     """
     recipe = RECIPES[recipe_name]
     defaults = DetectorConfig()
-    out = {"recipe": recipe_name, "train_args": FOLD_TRAIN_ARGS + recipe, "folds": [list(f) for f in FOLDS],
+    out = {"recipe": recipe_name, "train_args": FOLD_TRAIN_ARGS + recipe + (QUICK_FOLD_ARGS if quick else []), "folds": [list(f) for f in FOLDS],
            "seed": seed, "inner": inner, "reference_grouping": REFERENCE_GROUPING, "feature_sets": {}}
     every = 9 if quick else 3
     for fs in feature_sets:
@@ -228,7 +229,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
             train = [p for p in ALL_PREFIXES if p not in held]
             model = work / f"{recipe_name}_{fs}_fold{k}.json"
             seconds = (json.loads(model.read_text())["info"].get("train_seconds", 0.0) if reuse and model.is_file()
-                       else train_fold_model(model, train, fs, recipe, seed))
+                       else train_fold_model(model, train, fs, recipe + (QUICK_FOLD_ARGS if quick else []), seed))
             config, raws = raw_windows(model, fold_tiles(held, every))
             fold_raws.append(raws)
             info = json.loads(model.read_text())
@@ -387,7 +388,8 @@ def main() -> int:
         results["kfold"] = saved.get("kfold", saved)
     elif not args.no_folds:
         with tempfile.TemporaryDirectory(prefix="detector_folds_") as work:   # fold models are not kept
-            results["kfold"] = kfold(FEATURE_SETS, args.recipe, Path(work), "none" if args.quick else "crossfit",
+            results["kfold"] = kfold(("fused",) if args.quick else FEATURE_SETS, args.recipe, Path(work),
+                                     "none" if args.quick else "crossfit",
                                      quick=args.quick)
     for fs in () if args.folds_only else FEATURE_SETS:
         model = models_dir / model_name(fs)
