@@ -142,7 +142,7 @@ RECIPES = {"seed": [],                                              # the shippe
            "photometric": ["--photometric", "0.6"],                   # + grey-level augmentation of the copies
            "negatives": ["--negatives", "4000", "--stages", "16"]}    # + more, harder negatives (deeper cascade)
 SHIPPED_RECIPE = "seed"
-GRID_MIN_NEIGHBORS = (1, 2, 3, 4, 5, 6, 8, 10)
+GRID_MIN_NEIGHBORS = (1, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20)
 GRID_MARGIN = (-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
 # the grouping the folds report besides the inner choice: the node defaults before the k-fold protocol
 # (the trained cascade, OpenCV's 3 neighbours). The node defaults now are the choice over all four folds,
@@ -237,7 +237,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
                      "stages": len(info["stages"]), "stumps": sum(len(st["features"]) for st in info["stages"]),
                      "defaults": _rates(grouped_summary(config, raws, REFERENCE_GROUPING["min_neighbors"],
                                                         REFERENCE_GROUPING["window_margin"]))}
-            pr = grouped_summary(config, raws, 1, defaults.window_margin)
+            pr = grouped_summary(config, raws, 1, REFERENCE_GROUPING["window_margin"])
             entry["average_precision"] = pr["average_precision"]
             entry["best_at_10pct_false_alarms"] = _best_at(pr)
             if inner == "model":
@@ -260,7 +260,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
         pooled = DetectionAccumulator()
         for raws in fold_raws:
             for boxes, scores, gt, cut in raws:
-                keep = scores >= defaults.window_margin
+                keep = scores >= REFERENCE_GROUPING["window_margin"]
                 b, sc = group_windows(boxes[keep], scores[keep], defaults.group_iou, 1, defaults.containment,
                                       defaults.max_detections)
                 pooled.add_frame(b, sc, gt, cut)
