@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from aircraft_docking_tracker.config import param
-from multi_target_tracker.features import FEATURE_SETS, FUSED_DIM, feature_range
+from multi_target_tracker.features import FEATURE_SETS, FUSED_DIM, PackedStages, feature_range
 
 MODEL_FORMAT = "aircraft_docking_tracker/boosted-cascade"
 MODEL_VERSION = 1
@@ -105,28 +105,6 @@ class Stage:
         if max(np.abs(left).max(), np.abs(right).max(), abs(threshold)) > MAX_STAGE_VALUE:
             raise CascadeError(f"a stump value or stage threshold beyond +-{MAX_STAGE_VALUE:g}")
         return cls(features.astype(np.int64), thresholds.astype(np.int64), left, right, threshold)
-
-
-@dataclass(frozen=True)
-class PackedStages:
-    """All stages' stumps in flat arrays (what the compiled window loop reads): stage s holds stumps
-    ``ends[s-1] .. ends[s]-1`` and passes when their sum reaches ``stage_thresholds[s]``."""
-
-    features: np.ndarray
-    thresholds: np.ndarray
-    left: np.ndarray
-    right: np.ndarray
-    ends: np.ndarray
-    stage_thresholds: np.ndarray
-
-    @classmethod
-    def of(cls, stages: list[Stage]) -> "PackedStages":
-        def flat(name, dtype):
-            return np.ascontiguousarray(np.concatenate([getattr(s, name) for s in stages]) if stages
-                                        else np.zeros(0), dtype)
-        return cls(flat("features", np.int64), flat("thresholds", np.int64), flat("left", np.float64),
-                   flat("right", np.float64), np.cumsum([len(s.features) for s in stages], dtype=np.int64),
-                   np.asarray([s.threshold for s in stages], np.float64).reshape(-1))
 
 
 @dataclass

@@ -33,11 +33,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
+import numba
 import numpy as np
 from scipy.special import expit
 
 from aircraft_docking_tracker.config import ConfigError, param
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
@@ -67,12 +67,14 @@ class DetectorConfig:
                              choices=("model", "upright", "both"))
     group_iou: float = param(0.3, "a window joins a group when it overlaps the group's best window by this "
                              "IoU", low=0.0, high=1.0)
-    min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
-                               "detection score is this count plus a fraction", low=1, high=100)
+    min_neighbors: int = param(5, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
+                               "detection score is this count plus a fraction (default chosen by k-fold by video "
+                               "for the shipped drone-view model)", low=1, high=100)
     containment: float = param(0.4, "drop a group lying this much inside a better one (intersection over the "
                                "smaller box; 1: never)", low=0.0, high=1.0)
-    window_margin: float = param(0.0, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
-                                 "windows, >0 fewer)", low=-100.0, high=100.0)
+    window_margin: float = param(1.0, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
+                                 "windows, >0 fewer; default chosen by k-fold by video for the shipped drone-view "
+                                 "model)", low=-100.0, high=100.0)
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -218,30 +220,70 @@ def merge_levels(levels: list, with_vectors: bool):
     return np.vstack(boxes), np.concatenate(scores), (np.vstack(vectors) if with_vectors else None)
 
 
-def containment_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Intersection of boxes ``a[i]`` and ``b[j]`` over the smaller of the two areas (xywh boxes)."""
-    ix = np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0])
-    iy = np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1])
-    inter = np.clip(ix, 0.0, None) * np.clip(iy, 0.0, None)
-    smaller = np.minimum((a[:, 2] * a[:, 3])[:, None], (b[:, 2] * b[:, 3])[None, :])
-    return inter / np.maximum(smaller, 1e-12)
-
-
 def suppress_contained(boxes: np.ndarray, scores: np.ndarray, containment: float,
                        limit: int | None = None) -> np.ndarray:
     """Indices of the boxes kept, best score first, dropping each box lying ``containment`` inside a
-    better kept one (intersection over the smaller area); at most ``limit`` (memory: boxes x kept)."""
-    order = np.argsort(-scores, kind="stable")
+    better kept one (intersection over the smaller box's area); at most ``limit``."""
+    order = np.argsort(-np.asarray(scores, np.float64), kind="stable")
     limit = len(order) if limit is None else limit
     if containment >= 1.0 or len(order) < 2:
         return order[:limit]
-    kept: list[int] = []
+    boxes = np.ascontiguousarray(np.asarray(boxes, np.float64).reshape(-1, 4))
+    return _suppress_contained(boxes, order.astype(np.int64), float(containment), int(limit))
+
+
+@numba.njit(cache=True, nogil=True)
+def _suppress_contained(boxes, order, containment, limit):
+    """Greedy containment suppression over ``order`` (compiled: the kept boxes are few, the loop is O(n k))."""
+    kept = np.empty(min(len(order), max(limit, 0)), np.int64)
+    n_kept = 0
     for k in order:
-        if len(kept) >= limit:
+        if n_kept >= limit:
             break
-        if not kept or not (containment_matrix(boxes[k:k + 1], boxes[kept])[0] >= containment).any():
-            kept.append(int(k))
-    return np.asarray(kept, int)
+        ax, ay, aw, ah = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+        inside = False
+        for i in range(n_kept):
+            b = kept[i]
+            bx, by, bw, bh = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
+            inter = max(min(ax + aw, bx + bw) - max(ax, bx), 0.0) * max(min(ay + ah, by + bh) - max(ay, by), 0.0)
+            if inter / max(min(aw * ah, bw * bh), 1e-12) >= containment:
+                inside = True
+                break
+        if not inside:
+            kept[n_kept] = k
+            n_kept += 1
+    return kept[:n_kept]
+
+
+@numba.njit(cache=True, nogil=True)
+def _group_labels(boxes, group_iou):
+    """Group label of every window (boxes sorted best margin first) and each group's seed window.
+
+    Window ``s`` still free seeds a group that takes every later free window overlapping it by
+    ``group_iou`` (IoU as ``box_iou``: 0 for empty boxes); earlier windows are all taken by then.
+    """
+    n = len(boxes)
+    label = np.full(n, -1, np.int64)
+    seeds = np.empty(n, np.int64)
+    groups = 0
+    for s in range(n):
+        if label[s] >= 0:
+            continue
+        label[s] = groups
+        seeds[groups] = s
+        ax, ay, aw, ah = boxes[s, 0], boxes[s, 1], boxes[s, 2], boxes[s, 3]
+        area_a = max(aw, 0.0) * max(ah, 0.0)
+        for j in range(s + 1, n):
+            if label[j] >= 0:
+                continue
+            bx, by, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
+            inter = max(min(ax + aw, bx + bw) - max(ax, bx), 0.0) * max(min(ay + ah, by + bh) - max(ay, by), 0.0)
+            union = area_a + max(bw, 0.0) * max(bh, 0.0) - inter
+            iou = inter / union if union > 0.0 else 0.0
+            if iou >= group_iou:
+                label[j] = groups
+        groups += 1
+    return label, seeds[:groups]
 
 
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
@@ -254,23 +296,18 @@ def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
     margins = np.asarray(margins, np.float64).reshape(-1)
     order = np.argsort(-margins, kind="stable")
-    boxes, margins = boxes[order], margins[order]
-    free = np.ones(len(boxes), bool)
-    group_boxes, group_scores = [], []
-    for seed in range(len(boxes)):
-        if not free[seed]:
-            continue
-        candidates = np.flatnonzero(free)
-        members = candidates[box_iou(boxes[seed], boxes[candidates]) >= group_iou]
-        members = np.union1d(members, [seed])
-        free[members] = False
-        if len(members) < min_neighbors:
-            continue
-        group_boxes.append(boxes[members].mean(axis=0))
-        group_scores.append(len(members) + expit(margins[seed]))
-    if not group_boxes:
+    boxes, margins = np.ascontiguousarray(boxes[order]), margins[order]
+    if len(boxes) == 0:
         return np.zeros((0, 4)), np.zeros(0)
-    group_boxes, group_scores = np.asarray(group_boxes), np.asarray(group_scores)
+    label, seeds = _group_labels(boxes, float(group_iou))
+    counts = np.bincount(label, minlength=len(seeds))
+    sums = np.zeros((len(seeds), 4))
+    np.add.at(sums, label, boxes)          # members in window order, as a per-group mean adds them
+    big = np.flatnonzero(counts >= min_neighbors)
+    if len(big) == 0:
+        return np.zeros((0, 4)), np.zeros(0)
+    group_boxes = sums[big] / counts[big, None]
+    group_scores = counts[big] + expit(margins[seeds[big]])
     keep = suppress_contained(group_boxes, group_scores, containment, max_detections)
     return group_boxes[keep], group_scores[keep]
 

@@ -34,16 +34,11 @@ tested against.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import cv2
 import numba
 import numpy as np
 
 from aircraft_docking_tracker.config import param
-
-if TYPE_CHECKING:
-    from multi_target_tracker.cascade import PackedStages
 
 LBP_SIZE = 32          # texture window side (seed §2.1)
 BLOCK = 16             # texture block side
@@ -157,6 +152,30 @@ def window_features(lbp_patch: np.ndarray, contour_patch: np.ndarray, edge_thres
     return np.concatenate([scale_to_255(v_l), scale_to_255(v_c)])
 
 
+@dataclass(frozen=True)
+class PackedStages:
+    """A cascade's stumps in flat arrays, what :meth:`LevelScan.evaluate` reads: stage s holds stumps
+    ``ends[s-1] .. ends[s]-1`` and passes when their sum reaches ``stage_thresholds[s]``. Built from
+    any stages with ``features, thresholds, left, right, threshold`` (``cascade.Stage``); kept here so
+    that the cascade module imports the features and never the other way round."""
+
+    features: np.ndarray
+    thresholds: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    ends: np.ndarray
+    stage_thresholds: np.ndarray
+
+    @classmethod
+    def of(cls, stages: list) -> "PackedStages":
+        def flat(name, dtype):
+            return np.ascontiguousarray(np.concatenate([getattr(s, name) for s in stages]) if stages
+                                        else np.zeros(0), dtype)
+        return cls(flat("features", np.int64), flat("thresholds", np.int64), flat("left", np.float64),
+                   flat("right", np.float64), np.cumsum([len(s.features) for s in stages], dtype=np.int64),
+                   np.asarray([s.threshold for s in stages], np.float64).reshape(-1))
+
+
 class LevelScan:
     """Raw features and eq. 3-4 maxima of every window of one pyramid level, on a stride grid.
 
@@ -227,7 +246,7 @@ class LevelScan:
         self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
         self._y0, self._x0 = y0, x0
 
-    def evaluate(self, stages: "PackedStages", last_stage_margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate(self, stages: PackedStages, last_stage_margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Run a cascade on every window of the level: ``(passing window indices, last-stage score)``.
 
         Exactly the test of :meth:`Cascade.evaluate_vectors` on :meth:`vectors` (``255 v_k >= t max``

@@ -182,16 +182,34 @@ def truncated(boxes: np.ndarray, size: tuple[int, int], margin: float = 1.0) -> 
     return (b[:, 0] < margin) | (b[:, 1] < margin) | (b[:, 0] + b[:, 2] > w - margin) | (b[:, 1] + b[:, 3] > h - margin)
 
 
-def positive_vector(gray: np.ndarray, box, feature_set: str, edge_threshold: float) -> np.ndarray | None:
-    """The floored 1152-d vector of one box: the box plus its rim resized to one 34x34 level window."""
+def positive_vector(gray: np.ndarray, box, feature_set: str, edge_threshold: float,
+                    augment: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray | None:
+    """The floored 1152-d vector of one box: the box plus its rim resized to one 34x34 level window
+    (``augment(crop)`` first changes the cut pixels, e.g. :func:`photometric`)."""
     x, y, w, h = (float(v) for v in box)
     rx, ry = w / LBP_SIZE, h / LBP_SIZE        # one texture-level pixel in frame pixels
     x0, y0 = int(math.floor(x - rx)), int(math.floor(y - ry))
     x1, y1 = int(math.ceil(x + w + rx)), int(math.ceil(y + h + ry))
     if x0 < 0 or y0 < 0 or x1 > gray.shape[1] or y1 > gray.shape[0] or w < 4 or h < 4:
         return None
-    scan = LevelScan(gray[y0:y1, x0:x1], (LBP_SIZE + 2, LBP_SIZE + 2), 2, feature_set, edge_threshold)
+    crop = gray[y0:y1, x0:x1] if augment is None else augment(gray[y0:y1, x0:x1])
+    scan = LevelScan(crop, (LBP_SIZE + 2, LBP_SIZE + 2), 2, feature_set, edge_threshold)
     return scan.vectors(np.zeros(1, int))[0]
+
+
+def photometric(rng: np.random.Generator, strength: float) -> Callable[[np.ndarray], np.ndarray]:
+    """A random grey-level change of a crop, as other videos show the same objects: contrast gain in
+    ``[1 - s/2, 1 + s/2]``, brightness offset up to ``40 s`` grey levels, and with probability 1/2 a
+    Gaussian blur of sigma up to ``1.2 s`` pixels (another camera's focus, compression, altitude)."""
+    def augment(crop: np.ndarray) -> np.ndarray:
+        out = crop.astype(np.float32)
+        if rng.random() < 0.5:
+            out = cv2.GaussianBlur(out, (0, 0), max(0.3, rng.uniform(0, 1.2 * strength)))
+        gain = 1 + rng.uniform(-strength / 2, strength / 2)
+        mean = float(out.mean())
+        out = (out - mean) * gain + mean + rng.uniform(-40, 40) * strength
+        return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+    return augment
 
 
 FLIPS = {"none": [], "h": [1], "v": [0], "hv": [1, 0, -1]}
@@ -201,7 +219,7 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
                      rotate90: bool, flips: str, keep_truncated: bool = False, max_positives: int = 0,
                      rng: np.random.Generator | None = None, jitter: int = 0,
                      jitter_shift: float = 0.0625, jitter_scale: float = 1.1,
-                     positive_aspect: str = "box") -> tuple[np.ndarray, np.ndarray]:
+                     positive_aspect: str = "box", photometric_strength: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Vectors of every usable box (turned to the window's orientation when ``rotate90``) and its flips,
     and the window-orientation heights of the boxes used.
 
@@ -210,8 +228,10 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
     ``positive_aspect`` "window" reshapes every box to the window's shape (same centre and area)
     before cutting it: the scan only ever shows the cascade windows of that shape, so boxes of
     other shapes (e.g. vehicles at any heading) would teach it views it never meets.
+    ``photometric_strength`` > 0 also changes the grey levels of every jittered copy (:func:`photometric`).
     """
     rng = rng or np.random.default_rng(0)
+    augment = photometric(rng, photometric_strength) if photometric_strength > 0 else None
     wide = window[0] >= window[1]
     out, heights = [], []
     for item in data:
@@ -236,8 +256,8 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
                     w, h = b[2] * scale, b[3] * scale
                     dx, dy = rng.uniform(-jitter_shift, jitter_shift, 2) * (b[2], b[3])
                     jittered.append(np.array([b[0] + (b[2] - w) / 2 + dx, b[1] + (b[3] - h) / 2 + dy, w, h]))
-                for bj in jittered:
-                    v = positive_vector(g, bj, feature_set, edge_threshold)
+                for j, bj in enumerate(jittered):
+                    v = positive_vector(g, bj, feature_set, edge_threshold, augment if j else None)
                     if v is not None:
                         out.append(v)
     x = np.asarray(out, np.uint8).reshape(-1, FUSED_DIM)
@@ -372,6 +392,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(window: for objects whose boxes vary in shape, e.g. vehicles at any heading)")
     p.add_argument("--keep-truncated", action="store_true", help="also use boxes cut by the frame border")
     p.add_argument("--jitter", type=int, default=2, help="randomly shifted/scaled copies per positive view")
+    p.add_argument("--photometric", type=float, default=0.0,
+                   help="grey-level augmentation of the jittered copies (contrast, brightness, blur; 0: none, 1: strong)")
     p.add_argument("--max-positives", type=int, default=0, help="subsample positives to this many (0: all)")
     p.add_argument("--negative-pool", type=int, default=200_000,
                    help="once all windows the cascade accepts fit in this many vectors (1152 bytes each), keep "
@@ -415,7 +437,8 @@ def run(args) -> Cascade:
     say = lambda msg: print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)  # noqa: E731
     xp, heights = positive_vectors(data, window, cfg.feature_set, args.edge_threshold, args.rotate90,
                                    args.flips, args.keep_truncated, args.max_positives, rng, args.jitter,
-                                   args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5, args.positive_aspect)
+                                   args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5, args.positive_aspect,
+                                   args.photometric)
     say(f"{len(data)} images, {len(xp)} positive vectors")
     min_size = args.min_size or (float(np.percentile(heights, 2)) * 0.85 if len(heights) else 0.0)
     if 0 < min_size < window[1]:   # the scan never looks at windows smaller than the model's
@@ -434,6 +457,7 @@ def run(args) -> Cascade:
     info = {"data": [str(p) for p in args.yolo + args.voc + args.bag],
             "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
             "flips": args.flips, "jitter": args.jitter, "positive_aspect": args.positive_aspect,
+            "photometric": args.photometric, "max_positives": args.max_positives, "seed": args.seed,
             "search_min_size": min_size, "search_max_size": max_size}
 
     def save(cascade: Cascade) -> None:  # after every stage: an interrupted run still leaves a model

@@ -8,7 +8,7 @@ import pytest
 from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
 from multi_target_tracker.cascade import Cascade, CascadeError, CascadeTrainConfig, Stage, train_cascade
 from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_windows, suppress_contained
-from multi_target_tracker.train_cascade import LabelledImage, NegativeMiner, positive_vectors, window_shaped
+from multi_target_tracker.train_cascade import LabelledImage, NegativeMiner, photometric, positive_vectors, window_shaped
 
 WINDOW = (48, 24)
 
@@ -238,3 +238,29 @@ def test_contained_suppression_stops_at_the_limit():
     boxes = np.array([[100.0 * k, 0, 40, 20] for k in range(10)])
     assert suppress_contained(boxes, np.arange(10.0), 0.4, limit=3).tolist() == [9, 8, 7]
     assert suppress_contained(boxes, np.arange(10.0), 1.0, limit=3).tolist() == [9, 8, 7]
+
+
+def test_photometric_augmentation_changes_grey_levels_only():
+    rng = np.random.default_rng(3)
+    crop = rng.integers(60, 200, (40, 70), dtype=np.uint8)
+    augment = photometric(np.random.default_rng(0), 1.0)
+    outs = [augment(crop) for _ in range(20)]
+    assert all(o.shape == crop.shape and o.dtype == np.uint8 for o in outs)
+    means = [float(o.mean()) for o in outs]
+    assert np.ptp(means) > 10                                        # brightness varies
+    assert any(np.abs(o.astype(int) - crop).max() > 5 for o in outs)
+    same = photometric(np.random.default_rng(0), 1.0)
+    assert all(np.array_equal(o, same(crop)) for o in outs)          # reproducible from the seed
+
+
+def test_photometric_strength_zero_keeps_the_positives():
+    rng = np.random.default_rng(2)
+    image, boxes = _scene(rng, 3)
+    data = [LabelledImage("a", lambda: image, boxes)]
+    plain, _ = positive_vectors(data, (32, 32), "fused", 40.0, False, "h", rng=np.random.default_rng(1), jitter=2)
+    zero, _ = positive_vectors(data, (32, 32), "fused", 40.0, False, "h", rng=np.random.default_rng(1), jitter=2,
+                               photometric_strength=0.0)
+    strong, _ = positive_vectors(data, (32, 32), "fused", 40.0, False, "h", rng=np.random.default_rng(1), jitter=2,
+                                 photometric_strength=1.0)
+    assert np.array_equal(plain, zero)                               # strength 0: the former positives
+    assert abs(len(strong) - len(plain)) <= 3 and not np.array_equal(strong[:len(plain)], plain[:len(strong)])

@@ -90,3 +90,14 @@ def _random_stage(rng, vectors):
     thresholds = np.maximum(1, np.median(vectors[:, features], axis=0).astype(int) + 1)
     left, right = -rng.random(len(features)), rng.random(len(features))
     return Stage(features, thresholds, left, right, float((left + right).sum() / 2))
+
+
+def test_features_never_import_the_cascade():
+    """One direction only: cascade -> features (the features module must not import cascade, even for types)."""
+    import ast
+    from pathlib import Path
+
+    tree = ast.parse(Path(F.__file__).read_text())
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)} | \
+        {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not any(m and m.startswith("multi_target_tracker") for m in imported), imported
