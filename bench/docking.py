@@ -298,10 +298,90 @@ def run_reacquisition(n_scenes: int, seeds: int) -> None:
           f"| {summary['runs']} | {summary['declared_lost']:.0%} | {summary['median_frames_to_lost']} | "
           f"{summary['reacquired']:.0%} | {summary['median_frames_to_reacquire']} | {summary['worst_frames_to_reacquire']} |"]
     (HERE / "results" / "docking_reacquisition.md").write_text("\n".join(md) + "\n")
-    main_md = HERE / "results" / "docking.md"       # the section also goes into docking.md (bench/README.md)
-    if main_md.exists():
-        text = main_md.read_text().split(md[0])[0].rstrip("\n")
-        main_md.write_text(text + "\n\n" + "\n".join(md) + "\n")
+    put_section(md)
+    print("\n".join(md))
+
+
+def put_section(md: list[str]) -> None:
+    """Put the section ``md`` (its first line the ``## `` header) into results/docking.md, which
+    bench/README.md gathers: replace the section of that header if there, else append it."""
+    main_md = HERE / "results" / "docking.md"
+    if not main_md.exists():
+        return
+    lines, header = main_md.read_text().rstrip("\n").split("\n"), md[0]
+    if header in lines:
+        start = lines.index(header)
+        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+        lines = lines[:start] + md + ([""] + lines[end:] if end < len(lines) else [])
+    else:
+        lines = lines + [""] + md
+    main_md.write_text("\n".join(lines).rstrip("\n") + "\n")
+
+
+# ================================================================================================
+# Candidates of round 2 (issue 11): defaults vs the seed's preset vs one candidate, held out
+# ================================================================================================
+CANDIDATE = {"scale_check": 0.03, "n_initial": 50}     # chosen on seeds 100-105 only (bench/README.md)
+CANDIDATE_LABEL = "ISPF, scale check 0.03 + ΔN_0 = 50 (candidate)"
+
+
+def box_oracle(seq: dict) -> np.ndarray:
+    """Quadrilaterals (N, 4, 2) of a perfect follower of the start box: the first frame's axis-aligned
+    box moved by the true affine motion A_t A_0^{-1}. What any tracker that follows exactly the
+    region it was given scores against the true polygon (the cap of a loose-box start)."""
+    from aircraft_docking_tracker import affine_group as ag  # noqa: PLC0415
+
+    x, y, w, h = seq["gt_boxes"][0]
+    box = np.array([[x, y, 1.0], [x + w, y, 1.0], [x + w, y + h, 1.0], [x, y + h, 1.0]]).T
+    q0 = np.linalg.inv(ag.from_quad(seq["gt_quads"][0]))
+    return np.array([((ag.from_quad(q) @ q0) @ box)[:2].T for q in seq["gt_quads"]])
+
+
+def run_candidates(n_scenes: int, seeds: int, frames: int) -> None:
+    """``--candidates``: the held-out synthetic approaches (seeds 200..) from the loose box and from the
+    first polygon, for the defaults, the seed's preset and CANDIDATE, plus the box oracle."""
+    variants = {"ISPF (defaults)": {}, "ISPF, seed's choices (docking_tracker_seed.yaml)": SEED_PRESET,
+                CANDIDATE_LABEL: CANDIDATE}
+    started = time.time()
+    rows: dict = {}
+    with tempfile.TemporaryDirectory(prefix="bench_docking_") as tmp_name:
+        sequences = docking_sequences(Path(tmp_name), n_scenes, frames)
+        rows["box oracle (follows the start box exactly)", "box"] = [
+            score(seq, {"quads": box_oracle(seq), "boxes": seq["gt_boxes"], "times": np.zeros(len(seq["files"]))})
+            for seq in sequences]
+        for start in ("box", "polygon"):
+            for label, overrides in variants.items():
+                rows[label, start] = [score(seq, run_ours(seq, overrides, s, start))
+                                      for seq in sequences for s in range(seeds)]
+                a = np.array([r["success_auc"] for r in rows[label, start]])
+                print(f"{start:8s} {label:50s} median {np.median(a):.3f} worst {a.min():.3f} "
+                      f"[{time.time() - started:.0f} s]", flush=True)
+    table = []
+    for (label, start), rs in rows.items():
+        a = np.array([r["success_auc"] for r in rs])
+        table.append({"tracker": label, "start": start, "runs": len(rs), "auc_ge_05": float(np.mean(a >= 0.5)),
+                      "median_auc": float(np.median(a)), "mean_auc": float(np.mean(a)), "worst_auc": float(a.min()),
+                      "stop_iou_median": float(np.median([r["stop_iou"] for r in rs])),
+                      "fps": float(np.median([r["fps"] for r in rs])) if "oracle" not in label else None,
+                      "auc": a.tolist()})
+    payload = {"scenes": n_scenes, "seeds": seeds, "frames": frames, "candidate": CANDIDATE, "rows": table,
+               "runtime_s": time.time() - started, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    (HERE / "results" / "docking_candidates.json").write_text(json.dumps(payload, indent=1))
+    md = ["## Docking tracker: round-2 candidate, held out (issue 11)", "",
+          f"`python bench/docking.py --candidates`: synthetic approaches of seeds {REPORT_SEED0}-"
+          f"{REPORT_SEED0 + n_scenes - 1} ({frames} frames; the candidate was chosen on seeds 100-105 only), "
+          f"{seeds} tracker seeds, from the loose box (the default protocol) and from the first polygon. "
+          f"Candidate: {CANDIDATE}. The box oracle is the start box moved by the true motion: what a tracker "
+          "that follows exactly the region it was given scores against the true polygon. Runtime "
+          f"{payload['runtime_s'] / 60:.1f} min.", "",
+          "| start | tracker | runs | AUC >= 0.5 | median AUC | mean AUC | worst AUC | stop IoU (median) | frames/s |",
+          "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in table:
+        fps_cell = "" if r["fps"] is None else f"{r['fps']:.0f}"
+        md.append(f"| {r['start']} | {r['tracker']} | {r['runs']} | {r['auc_ge_05']:.0%} | {r['median_auc']:.3f} | "
+                  f"{r['mean_auc']:.3f} | {r['worst_auc']:.3f} | {r['stop_iou_median']:.3f} | {fps_cell} |")
+    (HERE / "results" / "docking_candidates.md").write_text("\n".join(md) + "\n")
+    put_section(md)
     print("\n".join(md))
 
 
@@ -360,6 +440,8 @@ def main() -> int:
     parser.add_argument("--data", type=Path, default=Path(os.environ.get("ADT_SHARED_DATA", REPO.parent / "shared" / "data")))
     parser.add_argument("--reacquisition", action="store_true",
                         help="only the re-acquisition experiment (results/docking_reacquisition.*)")
+    parser.add_argument("--candidates", action="store_true",
+                        help="only the round-2 held-out comparison (results/docking_candidates.*)")
     parser.add_argument("--peer-worker", nargs=2, metavar=("IN", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.peer_worker:
@@ -369,6 +451,10 @@ def main() -> int:
     cv2.setNumThreads(1)
     if args.reacquisition:
         run_reacquisition(args.scenes or (2 if args.quick else 10), 1 if args.quick else 2)
+        return 0
+    if args.candidates:
+        run_candidates(args.scenes or (2 if args.quick else 20), args.seeds or (1 if args.quick else 3),
+                       60 if args.quick else 150)
         return 0
     quick = args.quick
     seeds = args.seeds or (1 if quick else 3)

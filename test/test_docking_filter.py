@@ -115,6 +115,22 @@ def test_weighted_estimate_moves_little_when_one_score_moves_a_rounding_step():
     assert np.abs(ag.to_quad(a) - ag.to_quad(b)).max() < 0.05      # pixels
 
 
+def test_scale_check_moves_a_too_small_estimate_toward_the_true_scale_and_keeps_a_right_one():
+    """The multi-scale check of X̂ (``scale_check``): one step of exp(±s) toward the better-scoring scale,
+    none at the true state (a margin of tune_min_gain, so rounding does not decide)."""
+    frame, X = next(moving_target_scene(1))
+    flt = AffineParticleFilter(FilterConfig(seed=0, scale_check=0.03))
+    flt.start(frame, X)
+    small = X @ ag.exp_coords(np.array([-0.12, 0, 0, 0, 0, 0]))
+    score, patch = flt._score(small[None])
+    moved, moved_score, _ = flt._check_scale(small, float(score[0]), patch[0])
+    ratio = np.sqrt(np.linalg.det(moved[:2, :2]) / np.linalg.det(small[:2, :2]))
+    assert np.isclose(ratio, np.exp(0.03)) and moved_score > score[0] + 1e-3
+    score, patch = flt._score(X[None])
+    kept, kept_score, _ = flt._check_scale(X, float(score[0]), patch[0])
+    assert np.array_equal(kept, X) and kept_score == score[0]
+
+
 def test_ispf_uses_fewer_particles_than_its_maximum_when_the_target_is_easy():
     _, particles, _ = run_filter(FilterConfig(method="ispf", seed=2, n_total=600))
     assert particles.mean() < 0.5 * 600
