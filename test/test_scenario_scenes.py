@@ -159,6 +159,26 @@ def test_uav_is_deterministic_by_seed():
                for x, y in zip(a, b))
 
 
+def test_uav_lower_camera_scales_vehicles_and_keeps_the_default_scene():
+    """ground_resolution is the camera height: vehicles' boxes grow by it; 1 is the default scene exactly."""
+    base = UavSceneConfig(frames=6, difficulty=0, view="nadir", min_in_frame=1.0)
+    default = list(UavScene(base, seed=5).frames())
+    same = list(UavScene(UavSceneConfig(frames=6, difficulty=0, view="nadir", min_in_frame=1.0,
+                                        ground_resolution=1.0), seed=5).frames())
+    assert all(np.array_equal(a.image, b.image) for a, b in zip(default, same))
+    low = list(UavScene(UavSceneConfig(frames=6, difficulty=0, view="nadir", min_in_frame=1.0,
+                                       ground_resolution=2.0), seed=5).frames())
+    # same vehicles, headings and camera path, seen from half the height: each box side about doubles
+    ratios = []
+    for a, b in zip(default, low):
+        common = np.intersect1d(a.ground_truth["id"], b.ground_truth["id"])
+        for vid in common:
+            ra, rb = a.ground_truth[a.ground_truth["id"] == vid][0], b.ground_truth[b.ground_truth["id"] == vid][0]
+            ratios.append(np.sqrt((rb["w"] * rb["h"]) / (ra["w"] * ra["h"])))
+    assert len(ratios) >= 3
+    assert 1.8 < np.median(ratios) < 2.2
+
+
 def test_synthesize_detections():
     gt = np.zeros(3, dtype=UavFrame_dtype())
     gt["id"] = [1, 2, 3]
