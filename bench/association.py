@@ -522,6 +522,26 @@ def summary(results: dict, names: list[str]) -> dict:
     return out
 
 
+def _best_peer(results: dict, seq: str, metric: str) -> float:
+    """The best peer's score on ``seq`` (NaN when no peer ran)."""
+    return max((results[seq][p][metric] for p in PEERS if p in results[seq]), default=float("nan"))
+
+
+def _knobs(chosen: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in chosen.items())
+
+
+def _held_out_cells(seq: str, r: dict) -> str:
+    """The first cells of a held-out row: sequence, HOTA, MOTA, IDF1 (ends with '|')."""
+    return f"| {seq} | {r['hota']:.1f} | {r['mota']:.1f} | {r['idf1']:.1f} |"
+
+
+def _mean_worst_row(held_out: dict) -> str:
+    h = [r["hota"] for r in held_out.values()]
+    m = [r["mota"] for r in held_out.values()]
+    return f"| **mean / worst** | {np.mean(h):.1f} / {min(h):.1f} | {np.mean(m):.1f} / {min(m):.1f} | | | | |"
+
+
 def write_markdown(path: Path, results: dict, scale: dict, meta: dict, speed: dict, loso: dict | None = None,
                    spread: dict | None = None) -> None:
     lines = ["# Association benchmark (issues 6, 13)", "",
@@ -550,32 +570,21 @@ def write_markdown(path: Path, results: dict, scale: dict, meta: dict, speed: di
                   "| held-out sequence | HOTA | MOTA | IDF1 | best peer HOTA | best peer MOTA | chosen on the others |",
                   "|---|---:|---:|---:|---:|---:|---|"]
         for seq, r in loso["held_out"].items():
-            peers = [results[seq][p] for p in PEERS if p in results[seq]]
-            bh = max((x["hota"] for x in peers), default=float("nan"))
-            bm = max((x["mota"] for x in peers), default=float("nan"))
-            chosen = ", ".join(f"{k}={v}" for k, v in loso["chosen"][seq].items())
-            lines.append(f"| {seq} | {r['hota']:.1f} | {r['mota']:.1f} | {r['idf1']:.1f} | {bh:.1f} | {bm:.1f} | "
-                         f"{chosen} |")
-        h = [r["hota"] for r in loso["held_out"].values()]
-        m = [r["mota"] for r in loso["held_out"].values()]
-        lines += [f"| **mean / worst** | {np.mean(h):.1f} / {min(h):.1f} | {np.mean(m):.1f} / {min(m):.1f} | | | | |",
-                  "", "Chosen on all sequences (the defaults): " +
-                  ", ".join(f"{k}={v}" for k, v in loso["all_sequences"].items()) + ".", ""]
+            lines.append(f"{_held_out_cells(seq, r)} {_best_peer(results, seq, 'hota'):.1f} | "
+                         f"{_best_peer(results, seq, 'mota'):.1f} | {_knobs(loso['chosen'][seq])} |")
+        lines += [_mean_worst_row(loso["held_out"]),
+                  "", "Chosen on all sequences (the defaults): " + _knobs(loso["all_sequences"]) + ".", ""]
         if loso.get("held_out_domain"):
             lines += ["Stricter: leave one *domain* out (TUD-Campus; airport-2; all three synthetic UAV scenes at "
                       "once), chosen on the other domains:", "",
                       "| held-out sequence | HOTA | MOTA | IDF1 | best peer HOTA | gap | chosen on the other domains |",
                       "|---|---:|---:|---:|---:|---:|---|"]
             for seq, r in loso["held_out_domain"].items():
-                bh = max((results[seq][p]["hota"] for p in PEERS if p in results[seq]), default=float("nan"))
+                bh = _best_peer(results, seq, "hota")
                 domain = "synthetic UAV" if seq.startswith("uav") else seq
-                chosen = ", ".join(f"{k}={v}" for k, v in loso["chosen_domain"][domain].items())
-                lines.append(f"| {seq} | {r['hota']:.1f} | {r['mota']:.1f} | {r['idf1']:.1f} | {bh:.1f} | "
-                             f"{r['hota'] - bh:+.1f} | {chosen} |")
-            h = [r["hota"] for r in loso["held_out_domain"].values()]
-            m = [r["mota"] for r in loso["held_out_domain"].values()]
-            lines += [f"| **mean / worst** | {np.mean(h):.1f} / {min(h):.1f} | {np.mean(m):.1f} / {min(m):.1f} | | | | |",
-                      ""]
+                lines.append(f"{_held_out_cells(seq, r)} {bh:.1f} | {r['hota'] - bh:+.1f} | "
+                             f"{_knobs(loso['chosen_domain'][domain])} |")
+            lines += [_mean_worst_row(loso["held_out_domain"]), ""]
     if spread:
         seeds = ", ".join(next(iter(spread.values())))
         lines += [f"## Spread over fresh UAV scenes (difficulty 2, hides up to 170 frames; {seeds})",
