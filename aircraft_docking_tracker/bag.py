@@ -206,6 +206,9 @@ def default_qos_dict(reliable: bool = True, transient_local: bool = False, depth
     }
 
 
+MAX_REPLAY_DEPTH = 100_000  # a recorded queue depth above this is damaged metadata
+
+
 def qos_from_metadata(text: str | None):
     """The ``rclpy.qos.QoSProfile`` to replay a topic with, from ``offered_qos_profiles`` text.
 
@@ -220,16 +223,23 @@ def qos_from_metadata(text: str | None):
         items = yaml.safe_load(text) or []
     except yaml.YAMLError:
         return None
-    if not isinstance(items, list) or not items:
-        return None
+    if not isinstance(items, list) or not items or not all(isinstance(i, dict) for i in items):
+        return None  # damaged metadata: the QoS is unknown, as if none were recorded
 
     def is_(item, key, name, number):
         value = item.get(key)
         return value == number if isinstance(value, int) else str(value).lower() == name
 
+    def depth_of(item) -> int | None:
+        value = item.get("depth", 0) or 0
+        return value if isinstance(value, int) and 0 <= value <= MAX_REPLAY_DEPTH else None
+
+    depths = [depth_of(i) for i in items]
+    if None in depths:
+        return None
     reliable = all(is_(i, "reliability", "reliable", 1) for i in items)
     transient = all(is_(i, "durability", "transient_local", 1) for i in items)
-    depth = max(int(i.get("depth", 0) or 0) for i in items) or 10
+    depth = max(depths) or 10
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=depth,
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,

@@ -147,3 +147,19 @@ def test_writer_refuses_to_overwrite(tmp_path):
     write_sample(tmp_path / "a.mcap", n=1)
     with pytest.raises(BagError, match="exists"):
         BagWriter(tmp_path / "a.mcap")
+
+
+def test_replay_qos_from_recorded_metadata_and_from_damaged_metadata():
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+    from aircraft_docking_tracker.bag import qos_from_metadata
+
+    good = ("- history: 1\n  depth: 5\n  reliability: 1\n  durability: 2\n"
+            "- history: 1\n  depth: 20\n  reliability: 1\n  durability: 2\n")
+    qos = qos_from_metadata(good)
+    assert qos.depth == 20 and qos.reliability == ReliabilityPolicy.RELIABLE
+    assert qos.durability == DurabilityPolicy.VOLATILE
+    # a flipped bit in a bag's channel metadata (found by test_fuzz_bags): unknown QoS, never an exception
+    for damaged in ("- history: 1\n  depth: q0\n  reliability: 1\n", "- depth: -3\n", "- depth: 99999999999\n",
+                    "- [1, 2]\n", "- 7\n", "{depth: 5}\n", ":\n  - :"):
+        assert qos_from_metadata(damaged) is None, damaged
