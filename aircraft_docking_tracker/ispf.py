@@ -65,6 +65,7 @@ import numpy as np
 from . import affine_group as ag
 from .appearance import AppearanceConfig, ObservationModel, PoseEstimator
 from .config import ConfigError, param
+from .static_background import StaticBackground, foreground_extent
 
 
 class FrameError(ValueError):
@@ -120,6 +121,15 @@ class FilterConfig(AppearanceConfig):
     scale_check: float = param(0.0, "multi-scale check of X̂_t: also score X̂ scaled by exp(±this) about its "
                                "centre and keep the best, if better by tune_min_gain (log units); 0: off",
                                low=0.0, high=0.5)
+    extent_gain: float = param(0.0, "static camera: fraction κ of the foreground extent's correction applied "
+                               "to X̂ each frame (static_background.py; 0: off, the seed's filter)", low=0.0, high=1.0)
+    background_step: float = param(2.0, "static camera: grey levels per frame the background moves toward the "
+                                   "frame (running median)", low=0.1, high=50.0)
+    foreground_k: float = param(2.0, "static camera: foreground starts k σ above the frame's median difference",
+                                low=0.5, high=10.0)
+    max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
+                                          "frame outside the target is foreground (a moving camera)",
+                                          low=0.0, high=1.0)
     background_samples: int = param(8, "background states on a ring around X̂ for μ_B, σ_B", low=1, high=64)
     background_offset: float = param(1.0, "ring radius in object sizes (template units)", low=0.3, high=5.0)
     pyramid_ratio: float = param(1.0, "sample from the pyramid level where the target is this many "
@@ -196,6 +206,10 @@ class AffineParticleFilter:
         self._prior_log_aspect = 0.0
         self.particles = np.zeros((0, 3, 3))
         self._image, self._level, self._frame_shape = None, 0, (0, 0)
+        self.background = StaticBackground(step=config.background_step, k=config.foreground_k,
+                                           max_outside=config.max_foreground_outside)
+        self.extent_counts = {"measured": 0, "untrusted": 0, "none": 0, "implausible": 0}
+        self._foreground: np.ndarray | None = None
 
     # ------------------------------------------------------------------ shared building blocks
     @property
@@ -317,12 +331,47 @@ class AffineParticleFilter:
         self.background_stats.add(self._score(state @ ag.exp_coords(self._ring))[0])
         self.estimate = self.previous = state
         self.particles = np.repeat(state[None], self.n_carried, axis=0)
+        if self.config.extent_gain > 0:
+            self.background.start(frame, state)
+
+    def _begin(self, frame: np.ndarray) -> None:
+        """Before the particles move: the frame's pyramid level and (static camera) its foreground."""
+        if self.estimate is None:
+            raise FrameError("filter stepped before start()")
+        self._load(frame, self.estimate)
+        self._foreground = (self.background.observe(frame, self.estimate) if self.config.extent_gain > 0
+                            else None)
+
+    def _correct_extent(self, estimate: np.ndarray, states: np.ndarray):
+        """Move X̂ (and the particles) the fraction ``extent_gain`` toward the foreground's rectangle
+        (static_background.py); a rectangle more than 0.6-1.5x the estimate's sides or whose centre is
+        more than 0.3 sides off is implausible (another object merged, a partial silhouette) and unused."""
+        if self._foreground is None:
+            self.extent_counts["untrusted" if self.config.extent_gain > 0 else "none"] += 1
+            return estimate, states
+        extent = foreground_extent(self._foreground, estimate, self.background.scale)
+        if extent is None:
+            self.extent_counts["none"] += 1
+            return estimate, states
+        if not (0.6 < extent.width < 1.5 and 0.6 < extent.height < 1.5
+                and abs(extent.centre_u) < 0.3 and abs(extent.centre_v) < 0.3):
+            self.extent_counts["implausible"] += 1
+            return estimate, states
+        self.extent_counts["measured"] += 1
+        correction = ag.expm(self.config.extent_gain * ag.logm(extent.correction()))
+        return estimate @ correction, states @ correction
 
     def _finish(self, states: np.ndarray, scores: np.ndarray, patches: np.ndarray) -> FrameResult:
         """Steps 7-9: X̂_t = best particle, conditional model update, resample the carried set."""
         estimate, score, patch = self._estimate(states, scores, patches)  # step 7
         if self.config.scale_check > 0:
             estimate, score, patch = self._check_scale(estimate, score, patch)
+        if self.config.extent_gain > 0:
+            moved, states = self._correct_extent(estimate, states)
+            if moved is not estimate:
+                estimate = moved
+                score_, patch_ = self._score(estimate[None])
+                score, patch = float(score_[0]), patch_[0]
         self.background_stats.add(self._score(estimate @ ag.exp_coords(self._ring))[0])
         rule = self.config.update_rule
         updated = rule == "always" or score > self.background_stats.mean + self.background_stats.std
@@ -373,9 +422,7 @@ class AffineParticleFilter:
 
     def step(self, frame: np.ndarray) -> FrameResult:
         """One frame of the plain PF: propagate the fixed set, weigh by Sim, steps 7-9."""
-        if self.estimate is None:
-            raise FrameError("filter stepped before start()")
-        self._load(frame, self.estimate)
+        self._begin(frame)
         states = self._transition(self.particles)
         scores, patches = self._score(states)
         return self._finish(states, scores, patches)
@@ -407,10 +454,8 @@ class ISPF(AffineParticleFilter):
 
     def step(self, frame: np.ndarray) -> FrameResult:
         """Steps 1-9 of seed 000 §2.2 for one frame."""
-        if self.estimate is None:
-            raise FrameError("filter stepped before start()")
+        self._begin(frame)
         cfg = self.config
-        self._load(frame, self.estimate)
         states = self._transition(self.particles)                       # steps 1-2
         states, scores, patches = self.self_tune(states)                # step 3
         n, batch = len(states), len(states)                             # step 4
