@@ -159,6 +159,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, seed update rule": {"update_rule": "background"},
     "ISPF, anchor term β=0.3": {"anchor_weight": 0.3},
     "ISPF, tune all 6 (Li et al.)": {"tune_dims": "all"},
+    "ISPF, static-camera extent (stand set-up)": {"extent_gain": 0.3},
 }
 _DETECTOR = None
 
