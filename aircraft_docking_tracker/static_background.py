@@ -6,10 +6,15 @@ the lag (measured: at frame 100 of a 4-6x approach the model scores the lagging 
 true one 0.57). The background, though, does not learn the aircraft: this module keeps a model of
 the empty stand and measures, in the estimate's own template frame, where the foreground ends.
 
-* **Background** ``B``: the frame at pyramid level ``level`` (``cv2.pyrDown``); at the start the
-  region around the start state is filled in from its surroundings (``cv2.inpaint``, Telea), then
-  every frame moves each pixel of ``B`` toward the frame by at most ``step`` grey levels (a running
-  median, "sigma-delta": an aircraft that stands still is absorbed only after contrast/step frames).
+* **Background** ``B``: the frame at pyramid level ``level`` (``cv2.pyrDown``). At the start the
+  region around the start state (``guard`` times it) is *unknown*: it gives no foreground until each
+  of its pixels has been still (frame-to-frame change below ``still_level``) for ``still_frames``
+  frames, i.e. until the aircraft has left it; the pixel is then learnt at its value. (Filling the
+  region in from its surroundings, ``cv2.inpaint``, was measured first: the guess stays foreground
+  for tens of frames and holds a track that sits on the static stand; held-out loose-box starts with
+  it: 70 % of runs at AUC >= 0.5, with this rule 85 %.) Every frame moves each known pixel of ``B``
+  toward the frame by at most ``step`` grey levels (a running median, "sigma-delta": an aircraft that
+  stands still is absorbed only after contrast/step frames).
 * **Foreground** ``F ∈ [0, 1]``: ``|I - (a B + c)|`` (gain ``a`` and offset ``c`` fitted by least
   squares outside the target, so a global light change is not foreground), box-blurred 5x5 (rain
   streaks are thin), then ``clip((d - median - k σ) / (k σ), 0, 1)`` with the median and
@@ -75,22 +80,27 @@ class StaticBackground:
     """The empty stand's background and the foreground of each frame (see the module docstring)."""
 
     def __init__(self, level: int = 1, step: float = 2.0, k: float = 2.0, max_outside: float = 0.2,
-                 guard: float = 1.3, max_shift: float = 0.5):
+                 guard: float = 1.3, max_shift: float = 0.5, still_level: float = 3.0, still_frames: int = 5):
         self.level, self.step, self.k, self.max_outside, self.guard = level, step, k, max_outside, guard
-        self.max_shift = max_shift
+        self.max_shift, self.still_level, self.still_frames = max_shift, still_level, still_frames
         self._window: np.ndarray | None = None
         self.background: np.ndarray | None = None
         self.foreground: np.ndarray | None = None
         self.trusted = False
         self.scale = 1.0
+        self.known: np.ndarray | None = None
+        self._still: np.ndarray | None = None
+        self._previous: np.ndarray | None = None
 
     def start(self, frame: np.ndarray, state: np.ndarray) -> None:
         """B = the frame with the region around ``state`` filled in from its surroundings."""
         image = _level_image(frame, self.level)
         self.scale = image.shape[1] / np.asarray(frame).shape[1]
         hole = state_mask(state, self.guard, image.shape, self.scale)
-        grey = np.clip(image, 0, 255).astype(np.uint8)
-        self.background = cv2.inpaint(grey, hole, 5, cv2.INPAINT_TELEA).astype(np.float32)
+        self.background = image.copy()
+        self.known = hole == 0
+        self._still = np.zeros(image.shape, np.int32)
+        self._previous = image
         self.foreground, self.trusted = None, False
 
     def observe(self, frame: np.ndarray, state: np.ndarray) -> np.ndarray | None:
@@ -112,9 +122,20 @@ class StaticBackground:
             fg = np.clip((d - median - self.k * sigma) / (self.k * sigma), 0.0, 1.0)
             self.trusted = bool(np.isfinite(fg).all() and (fg[outside] > 0.5).mean() <= self.max_outside
                                 and self.camera_shift(image) <= self.max_shift)
-            self.foreground = fg if self.trusted else None
-        self.background += np.clip(image - self.background, -self.step, self.step)
+            self.foreground = fg * self.known if self.trusted else None
+        self._learn(image)
         return self.foreground
+
+    def _learn(self, image: np.ndarray) -> None:
+        """B moves toward the frame on known pixels; an unknown pixel (the start region) becomes known,
+        at its value, once it has been still for ``still_frames`` frames (the aircraft has left it)."""
+        still = cv2.blur(np.abs(image - self._previous), (3, 3)) < self.still_level
+        self._still = np.where(still, self._still + 1, 0)
+        learnt = ~self.known & (self._still >= self.still_frames)
+        self.background[learnt] = image[learnt]
+        self.known |= learnt
+        self.background += np.where(self.known, np.clip(image - self.background, -self.step, self.step), 0)
+        self._previous = image
 
     def camera_shift(self, image: np.ndarray) -> float:
         """Global shift [level pixels] between the background and ``image`` (phase correlation)."""

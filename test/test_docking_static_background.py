@@ -46,7 +46,7 @@ def test_foreground_is_the_moving_target_not_the_stand_nor_a_global_light_change
         bx, by = (int(round(v * s)) for v in (40 + 8 * i, 60 + 2 * i))
         away[max(by - 4, 0):by + 10 + 4, max(bx - 4, 0):bx + 20 + 4] = False
     assert inside > 0.8                                   # the target
-    assert (fg[away] > 0.5).mean() < 0.02                 # not the stand, not a sudden 20 % brighter light
+    assert (fg[away] > 0.5).mean() < 0.05                 # not the stand (noise tails), not a 20 % brighter light
 
 
 def test_a_moving_camera_gives_no_foreground():
@@ -78,6 +78,27 @@ def test_extent_measures_the_silhouette_in_the_estimates_frame(factor):
     assert abs(extent.centre_u) < 2 * cell and abs(extent.centre_v) < 2 * cell
     corrected = estimate @ extent.correction()
     assert np.allclose(ag.to_quad(corrected), ag.to_quad(truth), atol=3.0)
+
+
+def test_the_start_region_is_learnt_once_the_target_has_left_it():
+    """No inpainting guess: the start region is unknown (no foreground) until its pixels are still."""
+    rng = np.random.default_rng(3)
+    empty = stand(rng)
+    model = StaticBackground(level=1)
+    model.start(with_target(empty, (40, 60, 40, 20), rng=rng), ag.from_box(40, 60, 40, 20))
+    s = model.scale
+    region = (slice(int(60 * s), int(80 * s)), slice(int(40 * s), int(80 * s)))
+    assert not model.known[region].any()
+    for i in range(1, 15):                                  # the target jumps away and stays away
+        model.observe(with_target(empty, (200, 150, 40, 20), rng=rng), ag.from_box(200, 150, 40, 20))
+    assert model.known[region].all()
+    assert np.abs(model.background[region] - cv2_level(empty, s)[region]).mean() < 3.0
+
+
+def cv2_level(image, scale):
+    import cv2  # noqa: PLC0415
+
+    return cv2.resize(image.astype(np.float32), None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
 
 
 def test_extent_is_not_measured_when_the_silhouette_runs_off_the_search_region_or_is_absent():
