@@ -121,8 +121,11 @@ class FilterConfig(AppearanceConfig):
     scale_check: float = param(0.0, "multi-scale check of X̂_t: also score X̂ scaled by exp(±this) about its "
                                "centre and keep the best, if better by tune_min_gain (log units); 0: off",
                                low=0.0, high=0.5)
-    extent_gain: float = param(0.0, "static camera: fraction κ of the foreground extent's correction applied "
-                               "to X̂ each frame (static_background.py; 0: off, the seed's filter)", low=0.0, high=1.0)
+    extent_gain: float = param(0.3, "static camera: fraction κ of the foreground extent's correction applied "
+                               "to X̂ each frame (static_background.py; a moving camera turns it off frame by "
+                               "frame; 0: off, the seed's filter)", low=0.0, high=1.0)
+    extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
+                                   "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
     background_step: float = param(2.0, "static camera: grey levels per frame the background moves toward the "
                                    "frame (running median)", low=0.1, high=50.0)
     foreground_k: float = param(2.0, "static camera: foreground starts k σ above the frame's median difference",
@@ -208,7 +211,7 @@ class AffineParticleFilter:
         self._image, self._level, self._frame_shape = None, 0, (0, 0)
         self.background = StaticBackground(step=config.background_step, k=config.foreground_k,
                                            max_outside=config.max_foreground_outside)
-        self.extent_counts = {"measured": 0, "untrusted": 0, "none": 0, "implausible": 0}
+        self.extent_counts = {"measured": 0, "untrusted": 0, "none": 0, "implausible": 0, "refused": 0}
         self._foreground: np.ndarray | None = None
 
     # ------------------------------------------------------------------ shared building blocks
@@ -367,11 +370,15 @@ class AffineParticleFilter:
         if self.config.scale_check > 0:
             estimate, score, patch = self._check_scale(estimate, score, patch)
         if self.config.extent_gain > 0:
+            states_before = states
             moved, states = self._correct_extent(estimate, states)
             if moved is not estimate:
-                estimate = moved
-                score_, patch_ = self._score(estimate[None])
-                score, patch = float(score_[0]), patch_[0]
+                score_, patch_ = self._score(moved[None])
+                if float(score_[0]) >= score - self.config.extent_max_drop:
+                    estimate, score, patch = moved, float(score_[0]), patch_[0]
+                else:
+                    self.extent_counts["refused"] += 1
+                    states = states_before
         self.background_stats.add(self._score(estimate @ ag.exp_coords(self._ring))[0])
         rule = self.config.update_rule
         updated = rule == "always" or score > self.background_stats.mean + self.background_stats.std

@@ -149,7 +149,7 @@ def docking_sequences(tmp: Path, count: int, frames: int) -> list[dict]:
 # Trackers
 # ================================================================================================
 SEED_PRESET = dict(chart="unit", ar_dims="all", estimate="best", update_rule="background", anchor_weight=0.0,
-                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0)
+                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0)
 ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 undone, or an option tried)
     "ISPF, seed's choices (docking_tracker_seed.yaml)": SEED_PRESET,
     "ISPF, argmax estimate": {"estimate": "best"},
@@ -159,7 +159,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, seed update rule": {"update_rule": "background"},
     "ISPF, anchor term β=0.3": {"anchor_weight": 0.3},
     "ISPF, tune all 6 (Li et al.)": {"tune_dims": "all"},
-    "ISPF, static-camera extent (stand set-up)": {"extent_gain": 0.3},
+    "ISPF, no static-camera extent": {"extent_gain": 0.0},
 }
 _DETECTOR = None
 

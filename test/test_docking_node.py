@@ -156,3 +156,4 @@ def test_seed_preset_selects_the_seeds_choices():
     config = DockingConfig(**params)
     assert (config.chart, config.ar_dims, config.estimate, config.update_rule) == ("unit", "all", "best", "background")
     assert config.skew_pull == config.aspect_pull == config.tune_min_gain == config.anchor_weight == 0.0
+    assert config.extent_gain == 0.0
