@@ -1,6 +1,6 @@
 """Training frames of the UAV cascade as a YOLO folder (offline; the data itself is not in the repo).
 
-    python tools/uav_training_data.py OUT [--seeds 1000 1399] [--ground-resolution 3.0] [--frames 24] [--every 6]
+    python tools/uav_training_data.py OUT [--seeds 1000 1299] [--ground-resolution 3.0] [--frames 80] [--every 16]
 
 For each training seed (``UAV_TRAIN_SEEDS`` only: disjoint from the tuning and evaluation seeds),
 a UAV scene at the set-up's camera height; difficulty cycles 1, 2, 1, 2, 0 by seed (canopy, smoke
@@ -8,7 +8,10 @@ and look-alike clutter of every kind), every ``every``-th frame written as ``ima
 with ``labels/*.txt``:
 
 * class 0: a vehicle at least 70 % visible, its box reshaped to the cascade window's 3:2 aspect
-  (same centre and area; the scan only ever sees windows of that shape);
+  (same centre and area; the scan only ever sees windows of that shape), then enlarged ``context``
+  times about its centre: the window then holds the vehicle's outline against the ground around
+  it, which tells a camouflaged vehicle from the inside of a tree canopy of the same texture (the
+  detector's ``box_scale`` takes the context off again);
 * class 1: every other vehicle (hidden or partly hidden under trees or smoke): train with
   ``--ignore-class-ids 1``, so it is neither a positive nor cut as a negative.
 
@@ -32,11 +35,12 @@ from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
 WINDOW_ASPECT = 1.5
 
 
-def window_box(box, aspect: float = WINDOW_ASPECT) -> np.ndarray:
-    """``box`` x, y, w, h reshaped to ``aspect`` along its longer side (same centre and area)."""
+def window_box(box, aspect: float = WINDOW_ASPECT, context: float = 1.0) -> np.ndarray:
+    """``box`` x, y, w, h reshaped to ``aspect`` along its longer side (same centre and area), then
+    scaled ``context`` times about its centre."""
     x, y, w, h = (float(v) for v in box)
     a = aspect if w >= h else 1.0 / aspect
-    nw, nh = np.sqrt(w * h * a), np.sqrt(w * h / a)
+    nw, nh = np.sqrt(w * h * a) * context, np.sqrt(w * h / a) * context
     return np.array([x + (w - nw) / 2, y + (h - nh) / 2, nw, nh])
 
 
@@ -49,10 +53,13 @@ def yolo_line(cls: int, box, size: tuple[int, int]) -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", help="output folder (images/ + labels/)")
-    parser.add_argument("--seeds", nargs=2, type=int, default=[1000, 1399], metavar=("FIRST", "LAST"))
+    parser.add_argument("--seeds", nargs=2, type=int, default=[1000, 1299], metavar=("FIRST", "LAST"))
     parser.add_argument("--ground-resolution", type=float, default=UAV_SETUP_GROUND_RESOLUTION)
-    parser.add_argument("--frames", type=int, default=24, help="frames per scene")
-    parser.add_argument("--every", type=int, default=6, help="write every k-th frame (the middle one of each k)")
+    parser.add_argument("--frames", type=int, default=80, help="frames per scene (as long as the demo's: the "
+                        "canopies that hide a vehicle grow with the scene's length, and they are the hardest negatives)")
+    parser.add_argument("--context", type=float, default=1.3, help="vehicle windows enlarged this much about their "
+                        "centre (ground around the vehicle)")
+    parser.add_argument("--every", type=int, default=16, help="write every k-th frame (the middle one of each k)")
     args = parser.parse_args(argv)
     seeds = range(args.seeds[0], args.seeds[1] + 1)
     if seeds.start not in UAV_TRAIN_SEEDS or seeds[-1] not in UAV_TRAIN_SEEDS:
@@ -69,7 +76,7 @@ def main(argv=None) -> int:
                 continue
             size = (frame.image.shape[1], frame.image.shape[0])
             boxes, ignore = detection_truth(frame.ground_truth)
-            lines = [yolo_line(1, b, size) if ig else yolo_line(0, window_box(b), size) for b, ig in zip(boxes, ignore)]
+            lines = [yolo_line(1, b, size) if ig else yolo_line(0, window_box(b, context=args.context), size) for b, ig in zip(boxes, ignore)]
             positives += int((~ignore).sum())
             name = f"s{seed:04d}_f{k:03d}"
             cv2.imwrite(str(out / "images" / f"{name}.png"), frame.image)
