@@ -578,10 +578,9 @@ def markdown(results: dict, quick: bool) -> str:
             rows += ["", f"UAV scene vehicle sizes (boxes counted above): shorter box side 5/25/50/75/95th percentiles "
                      f"{' / '.join(f'{v:.0f}' for v in p)} px; {100 * uav['fraction_short_side_below_20px']:.0f} % below "
                      f"20 px, {100 * uav['fraction_short_side_below_32px']:.0f} % below 32 px. The set-up searches windows "
-                     f"from {uav['searched_min_size']:.0f} px high: each is upsampled to the 32-px texture window (and 64 px "
-                     "for the contour part), which is what makes the UAV set-up slow; a camera low enough for vehicles "
-                     ">= 20 px (about 2.4x the scene's current ground resolution, its narrowest vehicles being 8-9 px "
-                     "wide) would let the scan start at 20 px (about half the pixels per level)."]
+                     f"from {uav['searched_min_size']:.0f} px high (windows below 32 px are upsampled to the texture "
+                     "window, which is slow). The UAV camera's height, its set-up and their held-out numbers: "
+                     "bench/uav_detector.py."]
     if results.get("train_seconds"):
         rows += ["", "Training time [s]: " + ", ".join(f"{k} {v:.0f}" for k, v in results["train_seconds"].items())]
     return "\n".join(rows) + "\n"
