@@ -69,8 +69,11 @@ def _imread_gray(path: Path) -> Callable[[], np.ndarray]:
 
 
 def read_yolo_folder(folder: str | Path, include: list[str] | None = None, exclude: list[str] | None = None,
-                     classes: list[int] | None = None) -> list[LabelledImage]:
-    """A YOLO folder (``images/`` and ``labels/`` side by side); file-name prefix filters for splits."""
+                     classes: list[int] | None = None, ignore_classes: list[int] | None = None) -> list[LabelledImage]:
+    """A YOLO folder (``images/`` and ``labels/`` side by side); file-name prefix filters for splits.
+
+    Rows whose class is in ``ignore_classes`` (e.g. a vehicle mostly hidden under trees) are *ignored*:
+    neither positives nor cut as negatives; other rows outside ``classes`` are dropped."""
     folder = Path(folder)
     if not folder.is_dir():
         raise TrainingDataError(f"YOLO folder {folder} not found")
@@ -81,22 +84,32 @@ def read_yolo_folder(folder: str | Path, include: list[str] | None = None, exclu
         if not _prefix_ok(image_path.name, include, exclude):
             continue
         label = labels_dir / (image_path.stem + ".txt")
-        rows = []
+        rows, ignored = [], []
         if label.is_file():
             for line in label.read_text().splitlines():
                 parts = line.split()
-                if len(parts) >= 5 and (classes is None or int(float(parts[0])) in classes):
+                if len(parts) < 5:
+                    continue
+                cls = int(float(parts[0]))
+                if ignore_classes and cls in ignore_classes:
+                    ignored.append([float(v) for v in parts[1:5]])
+                elif classes is None or cls in classes:
                     rows.append([float(v) for v in parts[1:5]])
         size = _image_size(image_path)
-        boxes = np.zeros((len(rows), 4))
-        if rows:
-            r = np.asarray(rows)
-            w, h = r[:, 2] * size[0], r[:, 3] * size[1]
-            boxes = np.column_stack([r[:, 0] * size[0] - w / 2, r[:, 1] * size[1] - h / 2, w, h])
-        out.append(LabelledImage(image_path.name, _imread_gray(image_path), boxes))
+        boxes, ignore = (_yolo_boxes(r, size) for r in (rows, ignored))
+        out.append(LabelledImage(image_path.name, _imread_gray(image_path), boxes, ignore if len(ignore) else None))
     if not out:
         raise TrainingDataError(f"no images in {images_dir} (after prefix filters)")
     return out
+
+
+def _yolo_boxes(rows: list, size: tuple[int, int]) -> np.ndarray:
+    """Normalised YOLO ``cx cy w h`` rows -> (n, 4) x, y, w, h in pixels of an image of ``size`` (w, h)."""
+    if not rows:
+        return np.zeros((0, 4))
+    r = np.asarray(rows)
+    w, h = r[:, 2] * size[0], r[:, 3] * size[1]
+    return np.column_stack([r[:, 0] * size[0] - w / 2, r[:, 1] * size[1] - h / 2, w, h])
 
 
 def _image_size(path: Path) -> tuple[int, int]:
@@ -382,6 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--include-prefix", nargs="*", default=None, help="only image files with these name prefixes")
     p.add_argument("--exclude-prefix", nargs="*", default=None, help="skip image files with these name prefixes")
     p.add_argument("--class-ids", nargs="*", type=int, default=None, help="YOLO classes used as positives")
+    p.add_argument("--ignore-class-ids", nargs="*", type=int, default=None,
+                   help="YOLO classes ignored: neither positives nor cut as negatives (e.g. mostly hidden vehicles)")
     p.add_argument("--window", nargs=2, type=int, default=[64, 32], metavar=("W", "H"),
                    help="window size in frame pixels at scale 1 (the smallest object searched)")
     p.add_argument("--rotate90", action="store_true", help="objects appear turned by 90 degrees too: "
@@ -414,7 +429,8 @@ def build_parser() -> argparse.ArgumentParser:
 def load_training_data(args) -> list[LabelledImage]:
     data: list[LabelledImage] = []
     for folder in args.yolo:
-        data += read_yolo_folder(folder, args.include_prefix, args.exclude_prefix, args.class_ids)
+        data += read_yolo_folder(folder, args.include_prefix, args.exclude_prefix, args.class_ids,
+                                 args.ignore_class_ids)
     for folder in args.voc:
         data += read_voc_folder(folder, args.include_prefix, args.exclude_prefix)
     for bag in args.bag:

@@ -1,0 +1,213 @@
+"""Benchmark of the UAV camera's detector set-up (issue 12 items 3-4): camera height, accuracy, speed.
+
+    python bench/uav_detector.py [--quick]
+
+* **Camera height.** The vehicles' shorter box side (visible >= 70 %, not cut by the frame border)
+  at several ``UavSceneConfig.ground_resolution`` values (1 = the scene's default altitude) over the
+  evaluation seeds: the cascade's texture window is 32 px, so the set-up's altitude is the one at which
+  vehicles are comfortably above it without upsampled pyramid levels.
+* **Accuracy**, on evaluation seeds (``UAV_EVAL_SEEDS``; never used for training, ``UAV_TRAIN_SEEDS``, nor
+  for choosing the operating point, ``UAV_TUNING_SEEDS``) and the demo's seed 106: difficulty 1 (the
+  demo's) and 2 (more vehicles, smoke, more clutter), 80 frames each (the demo's length: the canopies
+  that hide a vehicle grow with it, and they are the hardest background), every 4th. Detection counts at
+  IoU >= 0.5 with an unmatched box; detection rate = TP / boxes, false-alarm rate = FP / detections;
+  vehicles hidden or less than 70 % visible are ignored. Also the rates as the demo's MOT scoring
+  counts the ground truth (every vehicle at least 30 % visible, border-cut ones included). Pooled over
+  all frames, and per seed the mean and the worst (seeds with at least 10 counted vehicles: at this
+  camera height a seed's frames may show only a few).
+* **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
+  side by side in this run: the set-up (its size range from the known altitude) against the same
+  model scanning every window size that fits the frame, and the former set-up (21x14 model at the
+  default altitude, windows from 14 px).
+
+Writes ``bench/results/uav_detector.json`` and ``.md``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))
+
+from aircraft_docking_tracker.config import from_mapping, package_config_dir  # noqa: E402
+from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
+from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
+from aircraft_docking_tracker.offline import build_processor  # noqa: E402
+from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
+    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UavScene, UavSceneConfig, detection_truth)
+from multi_target_tracker.detector import Detector, DetectorConfig  # noqa: E402
+from multi_target_tracker.train_cascade import truncated  # noqa: E402
+
+SETUP = "uav_camera.yaml"
+DEMO_SEED = 106
+# the former set-up (main before issue 12): 21x14 model at the default altitude, windows from 14 px
+FORMER = {"model": "uav_vehicles_fused.json", "window_margin": 1.5, "min_neighbors": 5}
+HEIGHTS = (1.0, 2.0, 2.5, 3.0, 4.0)
+TARGET_DETECTION, TARGET_FALSE_ALARMS, TARGET_FPS = 0.85, 0.15, 10.0
+MIN_SEED_BOXES = 10     # a seed enters mean / worst with at least this many counted vehicles
+
+
+def eval_seeds(quick: bool) -> list[tuple[int, int]]:
+    """(seed, difficulty) pairs: evaluation seeds of both difficulties and the demo's seed."""
+    first = UAV_EVAL_SEEDS.start
+    n = 3 if quick else 8
+    return [(first + k, 1) for k in range(n)] + [(first + 100 + k, 2) for k in range(n // 2)] + [(DEMO_SEED, 1)]
+
+
+def frames_of(seed: int, difficulty: int, ground_resolution: float, frames: int = 80, every: int = 4):
+    """``(gray, boxes, ignore (>= 70 % visible counted), ignore as the MOT scoring does)`` every ``every``-th frame."""
+    scene = UavScene(UavSceneConfig(frames=frames, fps=10.0, difficulty=difficulty,
+                                    ground_resolution=ground_resolution), seed=seed)
+    out = []
+    for k, frame in enumerate(scene.frames()):
+        if k % every == every // 2:
+            boxes, ignore = detection_truth(frame.ground_truth)
+            _, ignore_mot = detection_truth(frame.ground_truth, scene.config.hidden_below)
+            out.append((cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY), boxes, ignore, ignore_mot))
+    return out
+
+
+def short_sides(items) -> np.ndarray:
+    """Shorter box sides of the counted, uncut vehicles."""
+    sides = [np.minimum(b[:, 2], b[:, 3])[~ig & ~truncated(b, g.shape[::-1])] for g, b, ig, _ in items]
+    return np.concatenate(sides) if sides else np.zeros(0)
+
+
+def setup_detector() -> Detector:
+    processor = build_processor("detector", package_config_dir() / SETUP)
+    if processor.detector is None:
+        raise SystemExit(f"bench/uav_detector.py: {SETUP}: {processor.model_error}")
+    return processor.detector
+
+
+def run(det: Detector, items) -> dict:
+    acc, acc_mot, latencies = DetectionAccumulator(), DetectionAccumulator(), []
+    for gray, boxes, ignore, ignore_mot in items:
+        started = time.perf_counter()
+        table = det.detect(gray)
+        latencies.append(time.perf_counter() - started)
+        found = np.column_stack([table["x"], table["y"], table["w"], table["h"]])
+        acc.add_frame(found, table["score"], boxes, ignore)
+        acc_mot.add_frame(found, table["score"], boxes, ignore_mot)
+    s, m = acc.summary(), acc_mot.summary()
+    return {"detection_rate": s["detection_rate"], "false_alarm_rate": s["false_alarm_rate"],
+            "false_alarms_per_frame": s["false_positives"] / max(s["frames"], 1), "ground_truth": s["ground_truth"],
+            "detections_per_frame": s["detections"] / max(s["frames"], 1), "average_precision": s["average_precision"],
+            "frames": s["frames"],
+            "mot_counting": {"detection_rate": m["detection_rate"], "false_alarm_rate": m["false_alarm_rate"],
+                             "ground_truth": m["ground_truth"]},
+            "fps": fps(latencies), **latency_percentiles(latencies)}
+
+
+def spread(per_seed: list[dict]) -> dict:
+    pooled_tp = sum(r["detection_rate"] * r["ground_truth"] for r in per_seed)
+    pooled_gt = sum(r["ground_truth"] for r in per_seed)
+    pooled_det = sum(r["detections_per_frame"] * r["frames"] for r in per_seed)
+    frames = sum(r["frames"] for r in per_seed)
+    fp_per_frame = sum(r["false_alarms_per_frame"] * r["frames"] for r in per_seed) / max(frames, 1)
+    per_seed = [r for r in per_seed if r["ground_truth"] >= MIN_SEED_BOXES] or per_seed
+    det = [r["detection_rate"] for r in per_seed]
+    fa = [r["false_alarm_rate"] for r in per_seed]
+    return {"pooled_detection": pooled_tp / max(pooled_gt, 1), "pooled_false_alarms": 1 - pooled_tp / max(pooled_det, 1e-9),
+            "false_alarms_per_frame": fp_per_frame, "seeds_counted": len(per_seed),
+            "detection_mean": float(np.mean(det)), "detection_worst": float(np.min(det)),
+            "detection_median": float(np.median(det)), "false_alarms_mean": float(np.mean(fa)),
+            "false_alarms_worst": float(np.max(fa)), "false_alarms_median": float(np.median(fa)),
+            "fps_mean": float(np.mean([r["fps"] for r in per_seed]))}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="fewer seeds (about 2 min)")
+    args = parser.parse_args()
+    cv2.setNumThreads(1)
+    seeds = eval_seeds(args.quick)
+    det = setup_detector()
+    det.detect(np.zeros((480, 640), np.uint8))       # compile the scan before timing
+    # no altitude prior: every window size from the model's own window up to the frame
+    full = Detector(from_mapping(DetectorConfig, {**_fields(det.config), "min_size": float(det.window[1]),
+                                                  "max_size": 1e4}))
+    former = Detector(DetectorConfig(**FORMER))
+    results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
+               "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
+               "searched_window_heights": [det.min_size, det.max_size],
+               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "former": []}
+    for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
+        sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
+        results["heights"][str(g)] = {"short_side_percentiles_0_5_50_95_100":
+                                      np.percentile(sides, [0, 5, 50, 95, 100]).round(1).tolist(),
+                                      "boxes": int(len(sides))}
+    for seed, difficulty in seeds:
+        items = frames_of(seed, difficulty, UAV_SETUP_GROUND_RESOLUTION)
+        results["seeds"].append({"seed": seed, "difficulty": difficulty})
+        results["setup_results"].append(run(det, items))
+        results["full_pyramid"].append(run(full, items[::2]))      # speed and false alarms without the size prior
+        if difficulty == 1 and len(results["former"]) < (2 if args.quick else 3):
+            results["former"].append(run(former, frames_of(seed, difficulty, 1.0)[::2]))
+        r = results["setup_results"][-1]
+        print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
+              f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
+    for key in ("setup_results", "full_pyramid", "former"):
+        results[key + "_summary"] = spread(results[key])
+    results["setup_results_difficulty_1_summary"] = spread(
+        [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
+    (HERE / "results").mkdir(exist_ok=True)
+    (HERE / "results" / "uav_detector.json").write_text(json.dumps(results, indent=1))
+    (HERE / "results" / "uav_detector.md").write_text(markdown(results))
+    print((HERE / "results" / "uav_detector.md").read_text())
+    return 0
+
+
+def _fields(config: DetectorConfig) -> dict:
+    return {k: getattr(config, k) for k in config.__dataclass_fields__}
+
+
+def markdown(results: dict) -> str:
+    s, full, former = (results[k + "_summary"] for k in ("setup_results", "full_pyramid", "former"))
+    lo, hi = results["searched_window_heights"]
+    rows = ["## UAV camera detector set-up (issue 12)", "",
+            f"Set-up `config/{results['setup']}` (model `{results['model']}`), camera at `ground_resolution` "
+            f"{results['ground_resolution']:g} (the scene's default altitude is 1), windows searched {lo:.0f}-{hi:.0f} px "
+            f"high. Evaluation seeds never used for training or for the operating point"
+            f"{' (quick run: fewer seeds)' if results['quick'] else ''}; 20 frames per seed (80-frame scenes, every 4th); "
+            "vehicles hidden or < 70 % visible ignored; IoU >= 0.5; false-alarm rate = false detections / detections. "
+            "Speed: `Detector.detect` alone, one thread, 640x480, side by side in this run.", "",
+            "Vehicles' shorter box side by camera height (uncut boxes, >= 70 % visible):", "",
+            "| ground_resolution | boxes | min / 5th / 50th / 95th / max [px] |", "|---|---|---|"]
+    for g, e in results["heights"].items():
+        rows.append(f"| {g} | {e['boxes']} | {' / '.join(f'{v:.0f}' for v in e['short_side_percentiles_0_5_50_95_100'])} |")
+    rows += ["", "| seed (difficulty) | detection rate | false-alarm rate | false alarms / frame | AP | "
+             "as MOT counts: detection / false alarms | frames/s | full pyramid: detection / false alarms / frames/s |",
+             "|---|---|---|---|---|---|---|---|"]
+    for seed, r, f in zip(results["seeds"], results["setup_results"], results["full_pyramid"]):
+        m = r["mot_counting"]
+        rows.append(f"| {seed['seed']} ({seed['difficulty']}) | {r['detection_rate']:.3f} | {r['false_alarm_rate']:.3f} | "
+                    f"{r['false_alarms_per_frame']:.2f} | {r['average_precision']:.3f} | {m['detection_rate']:.3f} / "
+                    f"{m['false_alarm_rate']:.3f} | {r['fps']:.1f} | {f['detection_rate']:.3f} / "
+                    f"{f['false_alarm_rate']:.3f} / {f['fps']:.1f} |")
+    d1 = results["setup_results_difficulty_1_summary"]
+    line = lambda name, e: (f"| {name} | {e['pooled_detection']:.3f} / {e['pooled_false_alarms']:.3f} | "  # noqa: E731
+                            f"{e['false_alarms_per_frame']:.2f} | "
+                            f"{e['detection_mean']:.3f} / {e['detection_worst']:.3f} | {e['false_alarms_mean']:.3f} / "
+                            f"{e['false_alarms_worst']:.3f} | {e['seeds_counted']} | {e['fps_mean']:.1f} |")
+    rows += ["", "| detector | pooled detection / false alarms | false alarms / frame | detection mean / worst seed | "
+             "false alarms mean / worst seed | seeds (>= 10 vehicles) | frames/s (mean over seeds) |",
+             "|---|---|---|---|---|---|---|",
+             line("set-up, all seeds", s), line("set-up, difficulty 1 (the demo's)", d1),
+             line("same model, every window size (no altitude prior; every 2nd frame)", full),
+             line(f"former set-up (default altitude, 21x14 model, windows from 14 px; every 2nd frame)", former),
+             "", f"Targets (issue 12): detection >= {TARGET_DETECTION} at false alarms <= {TARGET_FALSE_ALARMS}; "
+             f">= {TARGET_FPS:g} frames/s at 640x480 on one core."]
+    return "\n".join(rows) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

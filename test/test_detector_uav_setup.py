@@ -1,0 +1,74 @@
+"""The UAV camera's detector set-up (config/uav_camera.yaml + its shipped model) on held-out UAV scenes.
+
+Scenes at the camera height the set-up is made for (``UAV_SETUP_GROUND_RESOLUTION``), seeds from
+``UAV_EVAL_SEEDS`` (never used for training or for choosing the operating point). The bounds hold
+with margin: bench/uav_detector.py measures the set-up on more seeds (see its table).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir, validate
+from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator
+from aircraft_docking_tracker.offline import build_processor
+from aircraft_docking_tracker.scenarios.uav import (
+    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig,
+    detection_truth)
+from multi_target_tracker.cascade import Cascade
+from multi_target_tracker.detector import DetectorConfig, resolve_model
+
+SETUP = package_config_dir() / "uav_camera.yaml"
+# pooled over seeds 3900-3903 the set-up measured detection 0.33 at false alarms 0.74 (3904-3907: 0.28 / 0.74,
+# 3908-3911: 0.48 / 0.64): far from issue 12's 0.85 / 0.15; these bounds keep a margin under that
+MIN_DETECTION, MAX_FALSE_ALARMS = 0.15, 0.9
+
+
+@pytest.fixture(scope="module")
+def detector():
+    processor = build_processor("detector", SETUP)
+    assert processor.detector is not None, processor.model_error
+    return processor.detector
+
+
+def test_uav_setup_validates_and_bounds_the_search_to_the_altitudes_vehicle_sizes(detector):
+    params = load_yaml_parameters(SETUP, "detector")
+    cfg = validate(DetectorConfig(**{k: v for k, v in params.items() if k in DetectorConfig.__dataclass_fields__}))
+    assert cfg.min_size > 0 and cfg.max_size > cfg.min_size           # the altitude fixes the size range
+    assert detector.min_size == cfg.min_size and detector.max_size == cfg.max_size
+    model = Cascade.load(resolve_model(cfg.model))
+    assert model.feature_set == "fused" and model.rotate90
+    assert cfg.min_size >= model.window[1]                              # no upsampled pyramid level
+    assert resolve_model(cfg.model).stat().st_size < 5_000_000
+
+
+def test_uav_protocol_seed_ranges_are_disjoint():
+    ranges = [set(UAV_TRAIN_SEEDS), set(UAV_TUNING_SEEDS), set(UAV_EVAL_SEEDS)]
+    assert all(not (a & b) for i, a in enumerate(ranges) for b in ranges[i + 1:])
+    assert 106 not in ranges[0] | ranges[1]                             # the demo's seed is held out
+
+
+def _counts(detector, seed: int) -> tuple[int, int, int]:
+    """(vehicles counted, detections, true detections) on every 8th frame of a demo-like scene."""
+    config = UavSceneConfig(frames=80, fps=10.0, difficulty=1, ground_resolution=UAV_SETUP_GROUND_RESOLUTION)
+    acc = DetectionAccumulator()
+    for k, frame in enumerate(UavScene(config, seed=seed).frames()):
+        if k % 8 == 4:
+            table = detector.detect(cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY))
+            boxes, ignore = detection_truth(frame.ground_truth)
+            acc.add_frame(np.column_stack([table["x"], table["y"], table["w"], table["h"]]), table["score"],
+                          boxes, ignore)
+    s = acc.summary()
+    return s["ground_truth"], s["detections"], s["true_positives"]
+
+
+def test_uav_setup_detects_the_vehicles_of_held_out_scenes(detector):
+    """Pooled over four held-out scenes (a scene at this altitude shows only a few vehicles at a time).
+    Far below issue 12's targets (see README): the bounds only say the set-up finds vehicles at all
+    and is not drowned in false alarms, with margin under what bench/uav_detector.py measures."""
+    counts = np.array([_counts(detector, seed) for seed in UAV_EVAL_SEEDS[900:904]])
+    vehicles, detections, true = counts.sum(axis=0)
+    assert vehicles >= 20, counts
+    assert true / vehicles >= MIN_DETECTION, counts
+    assert 1 - true / max(detections, 1) <= MAX_FALSE_ALARMS, counts
