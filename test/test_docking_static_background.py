@@ -123,9 +123,10 @@ def test_extent_correction_keeps_the_scale_up_with_a_growing_aircraft():
 
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
-    rendered = list(DockingScene(config, seed=100).frames())
-    frames = [cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY) for f in rendered]
-    quads = [f.quad for f in rendered]
+    frames, quads = [], []                 # grey frames and quads only (a DockingFrame carries float masks)
+    for f in DockingScene(config, seed=100).frames():
+        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
+        quads.append(f.quad)
     without = np.median([stop_scale_ratio(frames, quads, 0.0, s) for s in range(3)])
     with_fg = np.median([stop_scale_ratio(frames, quads, 0.3, s) for s in range(3)])
     assert with_fg > without + 0.1

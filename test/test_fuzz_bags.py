@@ -22,7 +22,6 @@ import io
 import json
 import os
 import random
-import resource
 import subprocess
 import sys
 import time
@@ -31,6 +30,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+from memory_helpers import peak_rss_mb
 
 HERE = Path(__file__).resolve().parent
 SEEDS = (11, 12)
@@ -242,7 +242,7 @@ def run_fuzz(seed: int, budget_s: float, work: Path) -> dict:
     return {"seed": seed, "cases": n, "outcomes": dict(outcomes), "crashes": crashes[:5],
             "pristine_failures": pristine_failures,
             "crash_count": len(crashes), "slowest_case_s": round(slowest, 3),
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+            "peak_rss_mb": peak_rss_mb()}
 
 
 # ----------------------------------------------------------------------------------- the test

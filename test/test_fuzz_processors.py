@@ -18,13 +18,13 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
-import resource
 import struct
 import time
 
 import cv2
 import numpy as np
 import pytest
+from memory_helpers import peak_rss_mb, reset_peak_rss, rss_mb
 from geometry_msgs.msg import Point32, PolygonStamped
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2, PointField
@@ -50,32 +50,6 @@ SPECS = {"detector": detector_node.SPEC, "association": association_node.SPEC,
          "docking_tracker": docking_tracker_node.SPEC}
 NODES = {"detector": detector_node.DetectorNode, "association": association_node.AssociationNode,
          "docking_tracker": docking_tracker_node.DockingTrackerNode}
-
-
-def reset_peak_rss() -> None:
-    """Start a new peak-memory window (Linux: ``clear_refs`` 5 resets VmHWM); else keep the lifetime peak."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-    except OSError:
-        pass
-
-
-def _status_mb(field: str) -> float:
-    """A memory figure of this process from /proc/self/status (peak RSS from getrusage elsewhere)."""
-    try:
-        with open("/proc/self/status") as f:
-            return next(int(line.split()[1]) for line in f if line.startswith(field + ":")) / 1024.0
-    except (OSError, StopIteration):
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
-def peak_rss_mb() -> float:
-    return _status_mb("VmHWM")
-
-
-def rss_mb() -> float:
-    return _status_mb("VmRSS")
 
 
 # ------------------------------------------------------------------------------------- inputs
