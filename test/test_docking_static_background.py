@@ -30,7 +30,7 @@ def with_target(background, box, value=240.0, rng=None, gain=1.0):
 def test_foreground_is_the_moving_target_not_the_stand_nor_a_global_light_change():
     rng = np.random.default_rng(0)
     empty = stand(rng)
-    model = StaticBackground(level=1)
+    model = StaticBackground()
     box = (40, 60, 40, 20)
     model.start(with_target(empty, box, rng=rng), ag.from_box(*box))
     for i in range(1, 12):
@@ -53,7 +53,7 @@ def test_a_moving_camera_gives_no_foreground():
     rng = np.random.default_rng(1)
     wide = stand(np.random.default_rng(2))
     wide = np.hstack([wide, wide[:, ::-1]])                # a panorama to pan over
-    model = StaticBackground(level=1)
+    model = StaticBackground()
     state = ag.from_box(100, 100, 40, 20)
     model.start(np.clip(wide[:, :320], 0, 255).astype(np.uint8), state)
     trusted = []
@@ -84,7 +84,7 @@ def test_the_start_region_is_learnt_once_the_target_has_left_it():
     """No inpainting guess: the start region is unknown (no foreground) until its pixels are still."""
     rng = np.random.default_rng(3)
     empty = stand(rng)
-    model = StaticBackground(level=1)
+    model = StaticBackground()
     model.start(with_target(empty, (40, 60, 40, 20), rng=rng), ag.from_box(40, 60, 40, 20))
     s = model.scale
     region = (slice(int(60 * s), int(80 * s)), slice(int(40 * s), int(80 * s)))
