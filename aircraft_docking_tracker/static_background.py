@@ -139,7 +139,7 @@ class StaticBackground:
         sample = change[::4, ::4]
         noise = float(np.median(sample))                        # the frame-to-frame change of a still pixel
         still = change < max(self.still_level, 3.0 * noise)
-        self._still = np.where(still, self._still + 1, 0)
+        self._still = np.where(still, np.minimum(self._still + 1, self.still_frames), 0)
         learnt = ~self.known & (self._still >= self.still_frames)
         self.background[learnt] = image[learnt]
         self.known |= learnt
