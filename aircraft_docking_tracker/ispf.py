@@ -128,6 +128,13 @@ class FilterConfig(AppearanceConfig):
     extent_gain: float = param(0.3, "static camera: fraction κ of the foreground extent's correction applied "
                                "to X̂ each frame (static_background.py; a moving camera turns it off frame by "
                                "frame; 0: off, the seed's filter)", low=0.0, high=1.0)
+    extent_rotation: float = param(0.0, "static camera: turn the measured rectangle to the silhouette's principal "
+                                   "axis, at most this much per frame [rad] (0: off; measured: follows the turn of "
+                                   "synthetic approaches but costs the moving-camera CarChase2)", low=0.0, high=0.3)
+    flicker_gain: float = param(0.0, "static camera: a per-pixel threshold learnt outside the target, this times "
+                                "the pixel's own difference from the background (flickering edges, glare; 0: off; measured: "
+                                "median AUC up, but the scale overshoots at the stop under a light ramp)",
+                                low=0.0, high=10.0)
     extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
                                    "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
     background_step: float = param(2.0, "static camera: grey levels per frame the background moves toward the "
@@ -214,7 +221,8 @@ class AffineParticleFilter:
         self.particles = np.zeros((0, 3, 3))
         self._image, self._level, self._frame_shape = None, 0, (0, 0)
         self.background = StaticBackground(step=config.background_step, k=config.foreground_k,
-                                           max_outside=config.max_foreground_outside)
+                                           max_outside=config.max_foreground_outside,
+                                           flicker_gain=config.flicker_gain)
         self.extent_counts = {"measured": 0, "untrusted": 0, "none": 0, "implausible": 0, "refused": 0}
 
     # ------------------------------------------------------------------ shared building blocks
@@ -323,6 +331,12 @@ class AffineParticleFilter:
         """Start on ``frame`` with the object at ``state`` (3x3): model, estimator, statistics, particles."""
         state = np.asarray(state, dtype=float)
         self._load(frame, state)
+        self._start_model(state)
+        if self.config.extent_gain > 0:
+            self.background.start(frame, state)
+
+    def _start_model(self, state: np.ndarray) -> None:
+        """Observation model, estimator, statistics and particles at ``state`` (the current frame loaded)."""
         self.model = ObservationModel(self.config)
         self.estimator = PoseEstimator(self.config)
         self.model.start(self._observe(state[None]))
@@ -337,8 +351,6 @@ class AffineParticleFilter:
         self.background_stats.add(self._score(state @ ag.exp_coords(self._ring))[0])
         self.estimate = self.previous = state
         self.particles = np.repeat(state[None], self.n_carried, axis=0)
-        if self.config.extent_gain > 0:
-            self.background.start(frame, state)
 
     def _begin(self, frame: np.ndarray) -> None:
         """Before the particles move: the frame's pyramid level and (static camera) its foreground."""
@@ -361,11 +373,18 @@ class AffineParticleFilter:
         if extent is None:
             self.extent_counts["none"] += 1
             return None
+        candidate = estimate
+        if self.config.extent_rotation > 0 and extent.elongation > 1.5:
+            q = to_chart(estimate[None])
+            q[0, 4] += float(np.clip(extent.axis_angle, -self.config.extent_rotation, self.config.extent_rotation))
+            candidate = from_chart(q)[0]
+            extent = foreground_extent(foreground, candidate, self.background.scale) or extent
         if not (0.6 < extent.width < 1.5 and 0.6 < extent.height < 1.5
                 and abs(extent.centre_u) < 0.3 and abs(extent.centre_v) < 0.3):
             self.extent_counts["implausible"] += 1
             return None
-        return ag.expm(self.config.extent_gain * ag.logm(extent.correction()))
+        measured = candidate @ extent.correction()
+        return ag.expm(self.config.extent_gain * ag.logm(ag.inverse(estimate) @ measured))
 
     def _finish(self, states: np.ndarray, scores: np.ndarray, patches: np.ndarray) -> FrameResult:
         """Steps 7-9: X̂_t = best particle, conditional model update, resample the carried set."""

@@ -54,6 +54,8 @@ class Extent:
     centre_v: float
     width: float            # in template widths
     height: float           # in template heights
+    axis_angle: float = 0.0     # image angle of the silhouette's major axis minus the template's u axis [rad]
+    elongation: float = 1.0     # ratio of the silhouette's principal standard deviations (major / minor)
 
     def correction(self) -> np.ndarray:
         """C (3x3) with ``X · C`` = the state whose template rectangle is this rectangle."""
@@ -84,10 +86,13 @@ class StaticBackground:
     """The empty stand's background and the foreground of each frame (see the module docstring)."""
 
     def __init__(self, max_width: int = 320, step: float = 2.0, k: float = 2.0, max_outside: float = 0.2,
-                 guard: float = 1.3, max_shift: float = 0.5, still_level: float = 3.0, still_frames: int = 5):
+                 guard: float = 1.3, max_shift: float = 0.5, still_level: float = 3.0, still_frames: int = 5,
+                 flicker_gain: float = 0.0, flicker_step: float = 1.0):
         self.max_width, self.step, self.k, self.max_outside, self.guard = max_width, step, k, max_outside, guard
         self.level = 0
         self.max_shift, self.still_level, self.still_frames = max_shift, still_level, still_frames
+        self.flicker_gain, self.flicker_step = flicker_gain, flicker_step
+        self.flicker: np.ndarray | None = None
         self._window: np.ndarray | None = None
         self.background: np.ndarray | None = None
         self.foreground: np.ndarray | None = None
@@ -109,6 +114,7 @@ class StaticBackground:
         self.known = hole == 0
         self._still = np.zeros(image.shape, np.int32)
         self._previous = image
+        self.flicker = np.zeros(image.shape, np.float32)
         self.foreground, self.trusted = None, False
 
     def observe(self, frame: np.ndarray, state: np.ndarray) -> np.ndarray | None:
@@ -122,11 +128,15 @@ class StaticBackground:
         if outside.sum() >= 100 and self.camera_shift(image, outside) <= self.max_shift:
             b, i = self.background[outside][::7], image[outside][::7]
             (gain, offset), *_ = np.linalg.lstsq(np.stack([b, np.ones_like(b)], 1), i, rcond=None)
-            d = cv2.blur(np.abs(image - (gain * self.background + offset)), (5, 5))
+            d = cv2.blur(np.abs(image - (gain * self.background + offset)) * self.known, (5, 5))
             rest = d[outside][::5]
             median = float(np.median(rest))
             sigma = 1.4826 * float(np.median(np.abs(rest - median))) + 1e-3
-            fg = np.clip((d - median - self.k * sigma) / (self.k * sigma), 0.0, 1.0)
+            fg = np.clip((d - median - self.k * sigma - self.flicker) / (self.k * sigma), 0.0, 1.0)
+            if self.flicker_gain > 0:
+                target = self.flicker_gain * np.maximum(d - median, 0.0)
+                self.flicker += np.where(outside & self.known,
+                                         np.clip(target - self.flicker, -self.flicker_step, self.flicker_step), 0.0)
             self.trusted = bool(np.isfinite(fg).all() and (fg[outside] > 0.5).mean() <= self.max_outside)
             self.foreground = fg * self.known if self.trusted else None
         self._learn(image)
@@ -168,16 +178,7 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
     rectangle, that is measured.
     """
     n = GRID_SIDE
-    u = ((np.arange(n) + 0.5) / n - 0.5) * extent
-    uu, vv = np.meshgrid(u, u)
-    grid = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)]).astype(np.float32)
-    affine = (np.asarray(state, dtype=float)[:2, :] * scale).astype(np.float32)
-    affine[:, 2] -= 0.5                             # pixel centres of the scaled image (as warp_patches)
-    maps = affine @ grid
-    patch = cv2.remap(foreground, maps[0].reshape(n, n), maps[1].reshape(n, n), cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    binary = cv2.morphologyEx((patch > threshold).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
-    count, labels = cv2.connectedComponents(binary, connectivity=8)
+    u, uu, vv, count, labels = _silhouettes(foreground, state, scale, extent, threshold)
     inner = (np.abs(uu) < 0.5) & (np.abs(vv) < 0.5)
     if count <= 1:
         return None
@@ -190,7 +191,36 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
         return None
     if xs.min() == 0 or ys.min() == 0 or xs.max() == n - 1 or ys.max() == n - 1:
         return None
-    cell = extent / n
+    return _rectangle(xs, ys, u, extent, state)
+
+
+def _silhouettes(foreground: np.ndarray, state: np.ndarray, scale: float, extent: float, threshold: float):
+    """F sampled on a GRID_SIDE² grid over ``extent`` times the state's template rectangle (template
+    coordinates u, v), thresholded, closed 3x3, and its connected components."""
+    n = GRID_SIDE
+    u = ((np.arange(n) + 0.5) / n - 0.5) * extent
+    uu, vv = np.meshgrid(u, u)
+    grid = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)]).astype(np.float32)
+    affine = (np.asarray(state, dtype=float)[:2, :] * scale).astype(np.float32)
+    affine[:, 2] -= 0.5                             # pixel centres of the scaled image (as warp_patches)
+    maps = affine @ grid
+    patch = cv2.remap(foreground, maps[0].reshape(n, n), maps[1].reshape(n, n), cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    binary = cv2.morphologyEx((patch > threshold).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    count, labels = cv2.connectedComponents(binary, connectivity=8)
+    return u, uu, vv, count, labels
+
+
+def _rectangle(xs: np.ndarray, ys: np.ndarray, u: np.ndarray, extent: float, state: np.ndarray) -> Extent:
+    """The bounding rectangle of grid cells (xs, ys) and their principal axis, as an Extent."""
+    cell = extent / GRID_SIDE
+    offsets = np.asarray(state, dtype=float)[:2, :2] @ np.stack([u[xs], u[ys]])     # image pixels
+    evals, evecs = np.linalg.eigh(np.cov(offsets))
+    major = evecs[:, 1]
+    u_axis = np.asarray(state, dtype=float)[:2, 0]
+    angle = float(np.arctan2(major[1], major[0]) - np.arctan2(u_axis[1], u_axis[0]))
+    angle = (angle + np.pi / 2) % np.pi - np.pi / 2
+    elongation = float(np.sqrt(max(evals[1], 1e-12) / max(evals[0], 1e-12)))
     u0, u1 = u[xs.min()] - cell / 2, u[xs.max()] + cell / 2
     v0, v1 = u[ys.min()] - cell / 2, u[ys.max()] + cell / 2
-    return Extent((u0 + u1) / 2, (v0 + v1) / 2, u1 - u0, v1 - v0)
+    return Extent((u0 + u1) / 2, (v0 + v1) / 2, u1 - u0, v1 - v0, angle, elongation)
