@@ -128,9 +128,10 @@ class FilterConfig(AppearanceConfig):
     extent_gain: float = param(0.3, "static camera: fraction κ of the foreground extent's correction applied "
                                "to X̂ each frame (static_background.py; a moving camera turns it off frame by "
                                "frame; 0: off, the seed's filter)", low=0.0, high=1.0)
-    extent_rotation: float = param(0.0, "static camera: turn the measured rectangle to the silhouette's principal "
-                                   "axis, at most this much per frame [rad] (0: off; measured: follows the turn of "
-                                   "synthetic approaches but costs the moving-camera CarChase2)", low=0.0, high=0.3)
+    extent_rotation: float = param(0.0, "static camera: the measured rectangle is turned to the silhouette's "
+                                   "principal axis, by at most this much per frame [rad] (0: off, the rectangle "
+                                   "keeps X̂'s rotation; measured: follows the turn, but from the first polygon the "
+                                   "scale overshoots at the stop)", low=0.0, high=0.3)
     flicker_gain: float = param(0.0, "static camera: a per-pixel threshold learnt outside the target, this times "
                                 "the pixel's own difference from the background (flickering edges, glare; 0: off; measured: "
                                 "median AUC up, but the scale overshoots at the stop under a light ramp)",

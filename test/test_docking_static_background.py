@@ -131,3 +131,39 @@ def test_extent_correction_keeps_the_scale_up_with_a_growing_aircraft():
     with_fg = np.median([stop_scale_ratio(frames, quads, 0.3, s) for s in range(3)])
     assert with_fg > without + 0.1
     assert 0.85 < with_fg < 1.15
+
+
+@pytest.mark.parametrize("degrees", [-25.0, -10.0, 0.0, 15.0])
+def test_extent_reports_the_silhouettes_principal_axis_against_the_estimates(degrees):
+    """extent_rotation's measurement: a 2:1 silhouette turned by ``degrees`` seen from a level estimate."""
+    import cv2  # noqa: PLC0415
+
+    fg = np.zeros((240, 320), np.float32)
+    truth = ag.from_params(np.array([[160.0, 120.0, np.sqrt(80 * 40), 2.0, np.deg2rad(degrees), 0.0]]))[0]
+    cv2.fillConvexPoly(fg, np.round(ag.to_quad(truth)).astype(np.int32), 1.0)
+    level = ag.from_box(115, 95, 90, 50)                   # level, and large enough to hold it turned
+    extent = foreground_extent(fg, level, 1.0)
+    assert extent is not None
+    assert np.rad2deg(extent.axis_angle) == pytest.approx(degrees, abs=2.0)
+    assert extent.elongation > 1.5
+
+
+def test_flicker_threshold_learns_a_flickering_edge_outside_the_target():
+    """flicker_gain: a pixel that keeps changing outside the target (a shimmering edge) stops being
+    foreground; with it off the edge stays foreground. The target itself stays foreground either way."""
+    rng = np.random.default_rng(5)
+    empty = stand(rng)
+    box = (40, 60, 40, 20)
+    results = {}
+    for gain in (0.0, 2.0):
+        model = StaticBackground(flicker_gain=gain)
+        model.start(with_target(empty, box, rng=rng), ag.from_box(*box))
+        for i in range(1, 40):
+            frame = with_target(empty, box, rng=rng).astype(np.float32)
+            frame[180:200, 200:300] += 40.0 if i % 2 else -40.0     # the flickering band
+            fg = model.observe(np.clip(frame, 0, 255).astype(np.uint8), ag.from_box(*box))
+        s = model.scale
+        band = fg[int(185 * s):int(195 * s), int(210 * s):int(290 * s)]
+        results[gain] = float((band > 0.5).mean())
+    assert results[0.0] > 0.5
+    assert results[2.0] < 0.1
