@@ -179,9 +179,14 @@ class DockingProcessor(MessageProcessor):
         self.last = DockingResult(WAITING)
 
     def status(self) -> dict:
-        return {"docking state": STATE_NAMES[self.last.state], "score": f"{self.last.score:.3f}",
-                "particles last frame": self.last.particles, "track starts": self.starts,
-                "method": self.tracker.config.method}
+        """Diagnostic values, with the static-camera extent's counts since the last start (how many
+        frames corrected X̂, and why the others did not: moving camera, no or implausible silhouette,
+        refused by the appearance)."""
+        values = {"docking state": STATE_NAMES[self.last.state], "score": f"{self.last.score:.3f}",
+                  "particles last frame": self.last.particles, "track starts": self.starts,
+                  "method": self.tracker.config.method}
+        values.update({f"extent {name}": count for name, count in self.tracker.filter.extent_counts.items()})
+        return values
 
 
 def build(configs: dict) -> DockingProcessor:

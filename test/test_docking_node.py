@@ -157,3 +157,17 @@ def test_seed_preset_selects_the_seeds_choices():
     assert (config.chart, config.ar_dims, config.estimate, config.update_rule) == ("unit", "all", "best", "background")
     assert config.skew_pull == config.aspect_pull == config.tune_min_gain == config.anchor_weight == 0.0
     assert config.extent_gain == 0.0
+
+
+def test_status_reports_the_static_camera_extent_counts():
+    """The diagnostics say how often the foreground's extent corrected X̂ and why it did not."""
+    scene = list(moving_target_scene(15))
+    proc = DockingProcessor(DockingConfig(initial_box=list(ag.to_box(scene[0][1]))))
+    for k, (frame, _) in enumerate(scene):
+        proc.process("image", image_msg(frame, k))
+    status = proc.status()
+    counts = {k: v for k, v in status.items() if k.startswith("extent ")}
+    assert set(counts) == {"extent measured", "extent untrusted", "extent none", "extent implausible",
+                           "extent refused"}
+    assert sum(counts.values()) == len(scene) - 1          # every frame after the start
+    assert counts["extent measured"] > len(scene) // 2   # a static camera and a clear target
