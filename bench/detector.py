@@ -141,7 +141,12 @@ FOLD_TRAIN_ARGS = ["--window", "64", "32", "--rotate90", "--flips", "hv", "--max
 QUICK_FOLD_ARGS = ["--max-positives", "1000", "--stages", "6", "--negatives", "1000"]   # --quick: a smoke run
 RECIPES = {"seed": [],                                              # the shipped recipe, made cheaper
            "photometric": ["--photometric", "0.6"],                   # + grey-level augmentation of the copies
-           "negatives": ["--negatives", "4000", "--stages", "16"]}    # + more, harder negatives (deeper cascade)
+           "negatives": ["--negatives", "4000", "--stages", "16"],    # + more, harder negatives (deeper cascade)
+           # one change at a time on top of `photometric` (issue 12 item 2): the miner already bootstraps every
+           # stage from full frames of every training prefix, so "more negatives" is more of them and more stages
+           "photometric+negatives": ["--photometric", "0.6", "--negatives", "4000", "--stages", "16"],
+           "photometric+turn": ["--photometric", "0.6", "--turn-jitter", "15"],   # headings between the 90-degree views
+           "photometric+window-aspect": ["--photometric", "0.6", "--positive-aspect", "window"]}
 SHIPPED_RECIPE = "seed"
 GRID_MIN_NEIGHBORS = (1, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20)
 GRID_MARGIN = (-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
@@ -356,7 +361,25 @@ def main() -> int:
                         help="measure nothing: put this k-fold result into bench/results/detector.json and rewrite "
                         "the tables and plots")
     parser.add_argument("--recipe", default=SHIPPED_RECIPE, choices=sorted(RECIPES), help="training recipe of the folds")
+    parser.add_argument("--compare", action="store_true",
+                        help="measure nothing else: run the k-fold protocol for --recipe (fused features, inner choice "
+                        "by crossfit) and put it into the recipe comparison of bench/results/detector.json")
+    parser.add_argument("--feature-sets", nargs="*", default=["fused"], choices=FEATURE_SETS,
+                        help="feature sets of --compare (all three: Table 1 by that recipe)")
+    parser.add_argument("--work", default=None, help="keep the fold models here (--compare; reused when present)")
     args = parser.parse_args()
+    if args.compare:
+        cv2.setNumThreads(1)
+        work = Path(args.work or tempfile.mkdtemp(prefix="detector_folds_"))
+        work.mkdir(parents=True, exist_ok=True)
+        started = time.perf_counter()
+        kf = kfold(tuple(args.feature_sets), args.recipe, work, "crossfit", reuse=True)
+        kf["wall_seconds"] = time.perf_counter() - started
+        (work / f"kfold_{args.recipe}.json").write_text(json.dumps(kf, indent=1))
+        results = json.loads((HERE / "results" / "detector.json").read_text())
+        add_to_comparison(results["kfold"], kf)
+        write_results(results)
+        return 0
     if args.update_folds:
         results = json.loads((HERE / "results" / "detector.json").read_text())
         saved = json.loads(Path(args.update_folds).read_text())
@@ -450,6 +473,23 @@ def main() -> int:
 
     write_results(results)
     return 0
+
+
+def add_to_comparison(kfold_results: dict, kf: dict) -> None:
+    """Put one recipe's k-fold run (its fused rows and per-fold figures; every feature set it ran) beside the
+    others: ``recipe_comparison`` (fused, one row per recipe) and ``recipe_runs[recipe]`` (all feature sets)."""
+    runs = kfold_results.setdefault("recipe_runs", {})
+    runs[kf["recipe"]] = {fs: {k: v for k, v in e.items() if not k.startswith("pooled_pr_")}
+                          for fs, e in kf["feature_sets"].items()}
+    if "fused" not in kf["feature_sets"]:
+        return
+    e = kf["feature_sets"]["fused"]
+    row = {"recipe": kf["recipe"], "options": RECIPES[kf["recipe"]], "defaults": e["defaults"],
+           "at_choice": e.get("at_choice"), "pooled_average_precision": e["pooled_average_precision"],
+           "pooled_best_at_10pct_false_alarms": e["pooled_best_at_10pct_false_alarms"],
+           "train_seconds": round(sum(f["train_seconds"] for f in e["folds"]), 1)}
+    comparison = [r for r in kfold_results.get("recipe_comparison", []) if r["recipe"] != kf["recipe"]]
+    kfold_results["recipe_comparison"] = comparison + [row]
 
 
 def write_results(results: dict) -> None:
