@@ -251,7 +251,8 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
     other shapes (e.g. vehicles at any heading) would teach it views it never meets.
     ``photometric_strength`` > 0 also changes the grey levels of every jittered copy (:func:`photometric`).
     ``turn_jitter`` > 0 also turns every jittered copy by up to that many degrees about its centre (headings
-    between the 90-degree views: vehicles changing lanes or turning, a camera not aligned with the street).
+    between the 90-degree views: vehicles turning or parked at an angle, a camera not aligned with the street;
+    up to 45 fills every heading) and cuts the turned box's upright bounding box, as the labels box such vehicles.
     """
     rng = rng or np.random.default_rng(0)
     augment = photometric(rng, photometric_strength) if photometric_strength > 0 else None
@@ -281,6 +282,9 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
                     jittered.append(np.array([b[0] + (b[2] - w) / 2 + dx, b[1] + (b[3] - h) / 2 + dy, w, h]))
                 for j, bj in enumerate(jittered):
                     angle = rng.uniform(-turn_jitter, turn_jitter) if j and turn_jitter > 0 else 0.0
+                    if angle:    # the turned vehicle's upright bounding box, as a labeller boxes it
+                        bj = turned_box(bj, angle)
+                        bj = window_shaped(bj, window) if positive_aspect == "window" else bj
                     v = positive_vector(g, bj, feature_set, edge_threshold, augment if j else None, angle)
                     if v is not None:
                         out.append(v)
@@ -288,6 +292,14 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
     if max_positives and len(x) > max_positives:
         x = x[np.sort(rng.choice(len(x), max_positives, replace=False))]
     return x, np.asarray(heights, float)
+
+
+def turned_box(box, angle: float) -> np.ndarray:
+    """The upright bounding box of ``box`` (x, y, w, h) turned by ``angle`` degrees about its centre."""
+    x, y, w, h = (float(v) for v in box)
+    c, s = abs(math.cos(math.radians(angle))), abs(math.sin(math.radians(angle)))
+    width, height = w * c + h * s, w * s + h * c
+    return np.array([x + (w - width) / 2, y + (h - height) / 2, width, height])
 
 
 def window_shaped(box, window: tuple[int, int]) -> np.ndarray:
@@ -421,7 +433,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--photometric", type=float, default=0.0,
                    help="grey-level augmentation of the jittered copies (contrast, brightness, blur; 0: none, 1: strong)")
     p.add_argument("--turn-jitter", type=float, default=0.0,
-                   help="turn the jittered copies by up to this many degrees about the box centre (0: none)")
+                   help="turn the jittered copies by up to this many degrees about the box centre and cut their upright "
+                   "bounding box (vehicles at any heading in nadir views; 45: every heading; 0: none)")
     p.add_argument("--max-positives", type=int, default=0, help="subsample positives to this many (0: all)")
     p.add_argument("--negative-pool", type=int, default=200_000,
                    help="once all windows the cascade accepts fit in this many vectors (1152 bytes each), keep "

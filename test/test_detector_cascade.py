@@ -286,6 +286,15 @@ def test_turn_jitter_zero_keeps_the_positives_and_turns_only_the_copies():
                                         rng=np.random.default_rng(1), jitter=2, **kw)[0]
     plain, zero, turned = run(), run(turn_jitter=0.0), run(turn_jitter=20.0)
     assert np.array_equal(plain, zero)                               # 0: the former positives, same draws
-    assert len(turned) == len(plain)
+    assert abs(len(turned) - len(plain)) <= 3                        # a turned copy's larger box may leave the frame
     assert np.array_equal(turned[0], plain[0])                       # the labelled box itself is never turned
     assert not np.array_equal(turned, plain)
+
+
+def test_turned_box_bounds_the_turned_rectangle():
+    from multi_target_tracker.train_cascade import turned_box
+    box = np.array([10.0, 20.0, 40.0, 20.0])
+    assert np.allclose(turned_box(box, 0.0), box) and np.allclose(turned_box(box, 90.0), [20, 10, 20, 40])
+    diag = turned_box(box, 45.0)
+    assert np.allclose(diag[2], diag[3]) and np.allclose(diag[2], 60 / np.sqrt(2))
+    assert np.allclose(diag[:2] + diag[2:] / 2, box[:2] + box[2:] / 2)          # same centre
