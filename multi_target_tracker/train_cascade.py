@@ -188,8 +188,12 @@ def read_bag(path: str | Path, every: int = 1, min_score: float = 0.0) -> list[L
     return out
 
 
-def truncated(boxes: np.ndarray, size: tuple[int, int], margin: float = 1.0) -> np.ndarray:
-    """Boxes touching the frame border (cut by it): True per box."""
+def truncated(boxes: np.ndarray, size: tuple[int, int], margin: float = 1.5) -> np.ndarray:
+    """Boxes touching the frame border (cut by it): True per box.
+
+    Closer than ``margin`` px to a border: labelling tools clip boxes to 1 px inside the image (the
+    drone-view tiles: 611 boxes end 1.0-1.25 px from the tile border, as many as end on or beyond it, and
+    56 % of both are squat halves of vehicles; only 30 boxes end 1.25-3 px from it)."""
     w, h = size
     b = np.asarray(boxes, float).reshape(-1, 4)
     return (b[:, 0] < margin) | (b[:, 1] < margin) | (b[:, 0] + b[:, 2] > w - margin) | (b[:, 1] + b[:, 3] > h - margin)

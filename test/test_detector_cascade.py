@@ -298,3 +298,10 @@ def test_turned_box_bounds_the_turned_rectangle():
     diag = turned_box(box, 45.0)
     assert np.allclose(diag[2], diag[3]) and np.allclose(diag[2], 60 / np.sqrt(2))
     assert np.allclose(diag[:2] + diag[2:] / 2, box[:2] + box[2:] / 2)          # same centre
+
+
+def test_boxes_clipped_one_pixel_inside_the_frame_count_as_cut():
+    from multi_target_tracker.train_cascade import truncated
+    boxes = np.array([[0.0, 50, 40, 20], [1.0, 50, 40, 20], [50, 50, 40, 20], [50, 1.0, 40, 20],
+                      [159.0 - 40, 50, 40, 20], [3.0, 50, 40, 20]])
+    assert truncated(boxes, (160, 120)).tolist() == [True, True, False, True, True, False]
