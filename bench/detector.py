@@ -145,8 +145,6 @@ RECIPES = {"seed": [],                                              # the shippe
            # one change at a time on top of `photometric` (issue 12 item 2): the miner already bootstraps every
            # stage from full frames of every training prefix, so "more negatives" is more of them and more stages
            "photometric+negatives": ["--photometric", "0.6", "--negatives", "4000", "--stages", "16"],
-           "photometric+turn": ["--photometric", "0.6", "--turn-jitter", "15"],   # headings between the 90-degree views
-           "photometric+window-aspect": ["--photometric", "0.6", "--positive-aspect", "window"],
            # windows for the aspect ratios that occur: boxes from 1:1 (vehicles at 45 degrees) to 2.6:1, a 48x32
            # window in both orientations overlaps each of them by IoU >= 0.6 at equal area and centre (a 64x32 one
            # only 0.55 on a square box: no margin for the scan's scale steps); positives cut at the window's shape
@@ -531,7 +529,9 @@ def kfold_markdown(kf: dict) -> list[str]:
     rows = ["### Generalisation to unseen videos: k-fold by video prefix (issue 12)", "",
             f"Folds (each held out whole): {'; '.join('+'.join(f) for f in kf['folds'])}. Every fold's cascade is trained "
             f"on the other prefixes with recipe `{kf['recipe']}` (`train_cascade {' '.join(kf['train_args'])}`); "
-            "Drone2_ held-out tiles thinned to every 3rd. Border-cut boxes ignored. *Reference*: grouping with "
+            "Drone2_ held-out tiles thinned to every 3rd. Border-cut boxes ignored (closer than "
+            f"{kf.get('border_margin', 1.0)} px to the tile border: the labels clip boxes 1 px inside the tile). "
+            "*Reference*: grouping with "
             f"min_neighbors {ref['min_neighbors']}, window_margin {ref['window_margin']} (the node defaults before this "
             "protocol). *Inner choice*: min_neighbors and window_margin with the highest detection rate at <= 8 % "
             "false alarms, chosen without the held-out fold's tiles (" + INNER_TEXT.get(kf.get("inner"), "-") + "), "
