@@ -242,7 +242,8 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
         folds, fold_raws = [], []
         for k, held in enumerate(FOLDS):
             train = [p for p in ALL_PREFIXES if p not in held]
-            model = work / f"{recipe_name}_{fs}_fold{k}.json"
+            tag = f"{recipe_name}_{fs}_fold{k}" + (f"_seed{seed}" if seed else "")
+            model = work / f"{tag}.json"
             seconds = (json.loads(model.read_text())["info"].get("train_seconds", 0.0) if reuse and model.is_file()
                        else train_fold_model(model, train, fs, recipe + (QUICK_FOLD_ARGS if quick else []), seed))
             config, raws = raw_windows(model, fold_tiles(held, every))
@@ -257,7 +258,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
             entry["best_at_10pct_false_alarms"] = _best_at(pr)
             if inner == "model":
                 inner_fold = FOLDS[(k + 1) % len(FOLDS)]
-                inner_model = work / f"{recipe_name}_{fs}_fold{k}_inner.json"
+                inner_model = work / f"{tag}_inner.json"
                 train_fold_model(inner_model, [p for p in train if p not in inner_fold], fs, recipe, seed)
                 inner_config, inner_raws = raw_windows(inner_model, fold_tiles(inner_fold, every))
                 entry["inner_fold"] = list(inner_fold)
@@ -376,6 +377,8 @@ def main() -> int:
     parser.add_argument("--feature-sets", nargs="*", default=["fused"], choices=FEATURE_SETS,
                         help="feature sets of --compare (all three: Table 1 by that recipe)")
     parser.add_argument("--work", default=None, help="keep the fold models here (--compare; reused when present)")
+    parser.add_argument("--seed", type=int, default=0, help="--compare: training seed of the fold models (another "
+                        "seed is kept apart, as the spread of that recipe over seeds)")
     parser.add_argument("--as-main", action="store_true",
                         help="--compare: this run (all three feature sets) also becomes the main k-fold table")
     args = parser.parse_args()
@@ -384,7 +387,7 @@ def main() -> int:
         work = Path(args.work or tempfile.mkdtemp(prefix="detector_folds_"))
         work.mkdir(parents=True, exist_ok=True)
         started = time.perf_counter()
-        kf = kfold(tuple(args.feature_sets), args.recipe, work, "crossfit", reuse=True)
+        kf = kfold(tuple(args.feature_sets), args.recipe, work, "crossfit", seed=args.seed, reuse=True)
         kf["wall_seconds"] = time.perf_counter() - started
         (work / f"kfold_{args.recipe}.json").write_text(json.dumps(kf, indent=1))
         results = json.loads((HERE / "results" / "detector.json").read_text())
@@ -492,6 +495,12 @@ def main() -> int:
 def add_to_comparison(kfold_results: dict, kf: dict) -> None:
     """Put one recipe's k-fold run (its fused rows and per-fold figures; every feature set it ran) beside the
     others: ``recipe_comparison`` (fused, one row per recipe) and ``recipe_runs[recipe]`` (all feature sets)."""
+    if kf.get("seed", 0):      # another training seed of a recipe: its spread, not a new row
+        spread = kfold_results.setdefault("seed_runs", {}).setdefault(kf["recipe"], {})
+        spread[str(kf["seed"])] = {fs: {k: e[k] for k in ("defaults", "at_choice", "pooled_average_precision",
+                                                          "pooled_best_at_10pct_false_alarms") if k in e}
+                                   for fs, e in kf["feature_sets"].items()}
+        return
     runs = kfold_results.setdefault("recipe_runs", {})
     runs.setdefault(kf["recipe"], {}).update({fs: {k: v for k, v in e.items() if not k.startswith("pooled_pr_")}
                                               for fs, e in kf["feature_sets"].items()})
@@ -588,6 +597,14 @@ def kfold_markdown(kf: dict) -> list[str]:
                             f"{c['worst_detection_rate']:.3f} / {c['worst_false_alarm_rate']:.3f} | "
                             f"{c['folds_meeting_target']} of {len(e['folds'])} | {e['pooled_average_precision']:.3f} | "
                             f"{e['pooled_best_at_10pct_false_alarms']['detection_rate']:.3f} |")
+    for recipe, seeds in kf.get("seed_runs", {}).items():
+        base = kf.get("recipe_runs", {}).get(recipe, {}).get("fused")
+        runs = ([("0", base)] if base else []) + [(k, v["fused"]) for k, v in sorted(seeds.items()) if "fused" in v]
+        if len(runs) > 1:
+            rows += ["", f"Spread over training seeds, recipe `{recipe}` (fused, inner choice): " + "; ".join(
+                f"seed {k}: mean {e['at_choice']['mean_detection_rate']:.3f} / {e['at_choice']['mean_false_alarm_rate']:.3f}, "
+                f"worst {e['at_choice']['worst_detection_rate']:.3f} / {e['at_choice']['worst_false_alarm_rate']:.3f}, "
+                f"pooled AP {e['pooled_average_precision']:.3f}" for k, e in runs) + "."]
     if kf.get("note"):
         rows += ["", kf["note"]]
     return rows + [""]
