@@ -188,24 +188,35 @@ def read_bag(path: str | Path, every: int = 1, min_score: float = 0.0) -> list[L
     return out
 
 
-def truncated(boxes: np.ndarray, size: tuple[int, int], margin: float = 1.0) -> np.ndarray:
-    """Boxes touching the frame border (cut by it): True per box."""
+def truncated(boxes: np.ndarray, size: tuple[int, int], margin: float = 1.5) -> np.ndarray:
+    """Boxes touching the frame border (cut by it): True per box.
+
+    Closer than ``margin`` px to a border: labelling tools clip boxes to 1 px inside the image (the
+    drone-view tiles: 611 boxes end 1.0-1.25 px from the tile border, as many as end on or beyond it, and
+    56 % of both are squat halves of vehicles; only 30 boxes end 1.25-3 px from it)."""
     w, h = size
     b = np.asarray(boxes, float).reshape(-1, 4)
     return (b[:, 0] < margin) | (b[:, 1] < margin) | (b[:, 0] + b[:, 2] > w - margin) | (b[:, 1] + b[:, 3] > h - margin)
 
 
 def positive_vector(gray: np.ndarray, box, feature_set: str, edge_threshold: float,
-                    augment: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray | None:
+                    augment: Callable[[np.ndarray], np.ndarray] | None = None, angle: float = 0.0) -> np.ndarray | None:
     """The floored 1152-d vector of one box: the box plus its rim resized to one 34x34 level window
-    (``augment(crop)`` first changes the cut pixels, e.g. :func:`photometric`)."""
+    (``augment(crop)`` first changes the cut pixels, e.g. :func:`photometric`; ``angle`` [deg] turns
+    the image about the box centre first, with the real surroundings, as a vehicle turning in a nadir view)."""
     x, y, w, h = (float(v) for v in box)
     rx, ry = w / LBP_SIZE, h / LBP_SIZE        # one texture-level pixel in frame pixels
     x0, y0 = int(math.floor(x - rx)), int(math.floor(y - ry))
     x1, y1 = int(math.ceil(x + w + rx)), int(math.ceil(y + h + ry))
     if x0 < 0 or y0 < 0 or x1 > gray.shape[1] or y1 > gray.shape[0] or w < 4 or h < 4:
         return None
-    crop = gray[y0:y1, x0:x1] if augment is None else augment(gray[y0:y1, x0:x1])
+    if angle:
+        turn = cv2.getRotationMatrix2D((x + w / 2, y + h / 2), float(angle), 1.0)
+        turn[:, 2] -= (x0, y0)    # output pixel (0, 0) is frame pixel (x0, y0)
+        crop = cv2.warpAffine(gray, turn, (x1 - x0, y1 - y0), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    else:
+        crop = gray[y0:y1, x0:x1]
+    crop = crop if augment is None else augment(crop)
     scan = LevelScan(crop, (LBP_SIZE + 2, LBP_SIZE + 2), 2, feature_set, edge_threshold)
     return scan.vectors(np.zeros(1, int))[0]
 
@@ -232,7 +243,8 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
                      rotate90: bool, flips: str, keep_truncated: bool = False, max_positives: int = 0,
                      rng: np.random.Generator | None = None, jitter: int = 0,
                      jitter_shift: float = 0.0625, jitter_scale: float = 1.1,
-                     positive_aspect: str = "box", photometric_strength: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                     positive_aspect: str = "box", photometric_strength: float = 0.0,
+                     turn_jitter: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Vectors of every usable box (turned to the window's orientation when ``rotate90``) and its flips,
     and the window-orientation heights of the boxes used.
 
@@ -242,6 +254,9 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
     before cutting it: the scan only ever shows the cascade windows of that shape, so boxes of
     other shapes (e.g. vehicles at any heading) would teach it views it never meets.
     ``photometric_strength`` > 0 also changes the grey levels of every jittered copy (:func:`photometric`).
+    ``turn_jitter`` > 0 also turns every jittered copy by up to that many degrees about its centre (headings
+    between the 90-degree views: vehicles turning or parked at an angle, a camera not aligned with the street;
+    up to 45 fills every heading) and cuts the turned box's upright bounding box, as the labels box such vehicles.
     """
     rng = rng or np.random.default_rng(0)
     augment = photometric(rng, photometric_strength) if photometric_strength > 0 else None
@@ -270,13 +285,25 @@ def positive_vectors(data: list[LabelledImage], window: tuple[int, int], feature
                     dx, dy = rng.uniform(-jitter_shift, jitter_shift, 2) * (b[2], b[3])
                     jittered.append(np.array([b[0] + (b[2] - w) / 2 + dx, b[1] + (b[3] - h) / 2 + dy, w, h]))
                 for j, bj in enumerate(jittered):
-                    v = positive_vector(g, bj, feature_set, edge_threshold, augment if j else None)
+                    angle = rng.uniform(-turn_jitter, turn_jitter) if j and turn_jitter > 0 else 0.0
+                    if angle:    # the turned vehicle's upright bounding box, as a labeller boxes it
+                        bj = turned_box(bj, angle)
+                        bj = window_shaped(bj, window) if positive_aspect == "window" else bj
+                    v = positive_vector(g, bj, feature_set, edge_threshold, augment if j else None, angle)
                     if v is not None:
                         out.append(v)
     x = np.asarray(out, np.uint8).reshape(-1, FUSED_DIM)
     if max_positives and len(x) > max_positives:
         x = x[np.sort(rng.choice(len(x), max_positives, replace=False))]
     return x, np.asarray(heights, float)
+
+
+def turned_box(box, angle: float) -> np.ndarray:
+    """The upright bounding box of ``box`` (x, y, w, h) turned by ``angle`` degrees about its centre."""
+    x, y, w, h = (float(v) for v in box)
+    c, s = abs(math.cos(math.radians(angle))), abs(math.sin(math.radians(angle)))
+    width, height = w * c + h * s, w * s + h * c
+    return np.array([x + (w - width) / 2, y + (h - height) / 2, width, height])
 
 
 def window_shaped(box, window: tuple[int, int]) -> np.ndarray:
@@ -409,6 +436,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jitter", type=int, default=2, help="randomly shifted/scaled copies per positive view")
     p.add_argument("--photometric", type=float, default=0.0,
                    help="grey-level augmentation of the jittered copies (contrast, brightness, blur; 0: none, 1: strong)")
+    p.add_argument("--turn-jitter", type=float, default=0.0,
+                   help="turn the jittered copies by up to this many degrees about the box centre and cut their upright "
+                   "bounding box (vehicles at any heading in nadir views; 45: every heading; 0: none)")
     p.add_argument("--max-positives", type=int, default=0, help="subsample positives to this many (0: all)")
     p.add_argument("--negative-pool", type=int, default=200_000,
                    help="once all windows the cascade accepts fit in this many vectors (1152 bytes each), keep "
@@ -454,7 +484,7 @@ def run(args) -> Cascade:
     xp, heights = positive_vectors(data, window, cfg.feature_set, args.edge_threshold, args.rotate90,
                                    args.flips, args.keep_truncated, args.max_positives, rng, args.jitter,
                                    args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5, args.positive_aspect,
-                                   args.photometric)
+                                   args.photometric, args.turn_jitter)
     say(f"{len(data)} images, {len(xp)} positive vectors")
     min_size = args.min_size or (float(np.percentile(heights, 2)) * 0.85 if len(heights) else 0.0)
     if 0 < min_size < window[1]:   # the scan never looks at windows smaller than the model's
@@ -473,7 +503,7 @@ def run(args) -> Cascade:
     info = {"data": [str(p) for p in args.yolo + args.voc + args.bag],
             "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
             "flips": args.flips, "jitter": args.jitter, "positive_aspect": args.positive_aspect,
-            "photometric": args.photometric, "max_positives": args.max_positives, "seed": args.seed,
+            "photometric": args.photometric, "turn_jitter": args.turn_jitter, "max_positives": args.max_positives, "seed": args.seed,
             "search_min_size": min_size, "search_max_size": max_size}
 
     def save(cascade: Cascade) -> None:  # after every stage: an interrupted run still leaves a model

@@ -264,3 +264,44 @@ def test_photometric_strength_zero_keeps_the_positives():
                                  photometric_strength=1.0)
     assert np.array_equal(plain, zero)                               # strength 0: the former positives
     assert abs(len(strong) - len(plain)) <= 3 and not np.array_equal(strong[:len(plain)], plain[:len(strong)])
+
+
+def test_turned_positive_is_cut_from_the_box_with_its_surroundings():
+    from multi_target_tracker.train_cascade import positive_vector
+    rng = np.random.default_rng(4)
+    image, boxes = _scene(rng, 2)
+    box = boxes[0]
+    plain = positive_vector(image, box, "fused", 40.0)
+    assert np.array_equal(positive_vector(image, box, "fused", 40.0, angle=360.0), plain)   # the same frame pixels
+    turned = [positive_vector(image, box, "fused", 40.0, angle=a) for a in (-15.0, 15.0)]
+    assert all(t is not None and not np.array_equal(t, plain) for t in turned)
+    assert not np.array_equal(turned[0], turned[1])
+
+
+def test_turn_jitter_zero_keeps_the_positives_and_turns_only_the_copies():
+    rng = np.random.default_rng(2)
+    image, boxes = _scene(rng, 3)
+    data = [LabelledImage("a", lambda: image, boxes)]
+    run = lambda **kw: positive_vectors(data, (32, 32), "fused", 40.0, False, "none",  # noqa: E731
+                                        rng=np.random.default_rng(1), jitter=2, **kw)[0]
+    plain, zero, turned = run(), run(turn_jitter=0.0), run(turn_jitter=20.0)
+    assert np.array_equal(plain, zero)                               # 0: the former positives, same draws
+    assert abs(len(turned) - len(plain)) <= 3                        # a turned copy's larger box may leave the frame
+    assert np.array_equal(turned[0], plain[0])                       # the labelled box itself is never turned
+    assert not np.array_equal(turned, plain)
+
+
+def test_turned_box_bounds_the_turned_rectangle():
+    from multi_target_tracker.train_cascade import turned_box
+    box = np.array([10.0, 20.0, 40.0, 20.0])
+    assert np.allclose(turned_box(box, 0.0), box) and np.allclose(turned_box(box, 90.0), [20, 10, 20, 40])
+    diag = turned_box(box, 45.0)
+    assert np.allclose(diag[2], diag[3]) and np.allclose(diag[2], 60 / np.sqrt(2))
+    assert np.allclose(diag[:2] + diag[2:] / 2, box[:2] + box[2:] / 2)          # same centre
+
+
+def test_boxes_clipped_one_pixel_inside_the_frame_count_as_cut():
+    from multi_target_tracker.train_cascade import truncated
+    boxes = np.array([[0.0, 50, 40, 20], [1.0, 50, 40, 20], [50, 50, 40, 20], [50, 1.0, 40, 20],
+                      [159.0 - 40, 50, 40, 20], [3.0, 50, 40, 20]])
+    assert truncated(boxes, (160, 120)).tolist() == [True, True, False, True, True, False]
