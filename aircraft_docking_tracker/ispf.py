@@ -55,7 +55,9 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
 * ``extent_gain`` (static camera, on by default): after step 7, X̂ and the particles move that
   fraction toward the rectangle of the foreground against the empty stand, measured in X̂'s own
   template frame (``static_background.py``), unless that costs Sim more than ``extent_max_drop``.
-  The subspace learns a lag behind a growing aircraft; the background does not.
+  The subspace learns a lag behind a growing aircraft; the background does not. Measured and off
+  by default: ``extent_rotation`` (the rectangle measured in X̂ turned toward the silhouette's
+  principal axis) and ``flicker_gain`` (static_background.py); README, docking section.
 * The frame is sampled from the pyramid level (``cv2.pyrDown``) where the target is about
   ``pyramid_ratio`` template sizes large, so big targets cost no more than small ones.
 """

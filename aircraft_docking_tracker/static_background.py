@@ -17,8 +17,9 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   toward the frame by at most ``step`` grey levels (a running median, "sigma-delta": an aircraft that
   stands still is absorbed only after contrast/step frames).
 * **Foreground** ``F ∈ [0, 1]``: ``|I - (a B + c)|`` (gain ``a`` and offset ``c`` fitted by least
-  squares outside the target, so a global light change is not foreground), box-blurred 5x5 (rain
-  streaks are thin), then ``clip((d - median - k σ) / (k σ), 0, 1)`` with the median and
+  squares outside the target, so a global light change is not foreground), zero on unknown pixels,
+  then box-blurred 5x5 (rain streaks are thin; zeroing first keeps the unknown region's difference
+  from leaking a ring of foreground round it), then ``clip((d - median - k σ) / (k σ), 0, 1)`` with the median and
   ``σ = 1.4826 MAD`` of ``d`` outside the target (the frame's own noise level).
 * **Trust**: the frame gives no measurement (counted as ``untrusted``) when the camera moved — the
   phase correlation of the frame with the previous one, the target's region masked
@@ -28,11 +29,15 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   panning camera looks static.
 * **Cost**: everything runs at the pyramid level at most ``max_width`` (320) pixels wide, about 2 ms
   a frame on one core at 640x480 and at 1280x720 alike.
+* **Flicker** (``flicker_gain``, off by default): a per-pixel threshold added to ``k σ``, learnt
+  outside the target as ``flicker_gain`` times the pixel's own difference (a sigma-delta step of
+  ``flicker_step`` a frame), for edges that shimmer and glare that moves.
 * **Extent** (:func:`foreground_extent`): ``F`` sampled on a grid covering ``extent`` times the
   estimate's template rectangle, in the estimate's template coordinates ``(u, v)``; threshold, close
   3x3, the connected components that overlap the rectangle; their bounding box ``[u0, u1] x [v0, v1]``
   is the measured rectangle (a silhouette that reaches the grid's border is not measured: it is
-  merged with something larger than the target).
+  merged with something larger than the target), with the principal axis of its cells in the image
+  (for ``extent_rotation`` in ``ispf.py``).
 """
 from __future__ import annotations
 
