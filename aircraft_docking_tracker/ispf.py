@@ -334,12 +334,6 @@ class AffineParticleFilter:
         """Start on ``frame`` with the object at ``state`` (3x3): model, estimator, statistics, particles."""
         state = np.asarray(state, dtype=float)
         self._load(frame, state)
-        self._start_model(state)
-        if self.config.extent_gain > 0:
-            self.background.start(frame, state)
-
-    def _start_model(self, state: np.ndarray) -> None:
-        """Observation model, estimator, statistics and particles at ``state`` (the current frame loaded)."""
         self.model = ObservationModel(self.config)
         self.estimator = PoseEstimator(self.config)
         self.model.start(self._observe(state[None]))
@@ -354,6 +348,8 @@ class AffineParticleFilter:
         self.background_stats.add(self._score(state @ ag.exp_coords(self._ring))[0])
         self.estimate = self.previous = state
         self.particles = np.repeat(state[None], self.n_carried, axis=0)
+        if self.config.extent_gain > 0:
+            self.background.start(frame, state)
 
     def _begin(self, frame: np.ndarray) -> None:
         """Before the particles move: the frame's pyramid level and (static camera) its foreground."""

@@ -119,7 +119,7 @@ class StaticBackground:
         self.known = hole == 0
         self._still = np.zeros(image.shape, np.int32)
         self._previous = image
-        self.flicker = np.zeros(image.shape, np.float32)
+        self.flicker = np.zeros(image.shape, np.float32) if self.flicker_gain > 0 else None
         self.foreground, self.trusted = None, False
 
     def observe(self, frame: np.ndarray, state: np.ndarray) -> np.ndarray | None:
@@ -137,8 +137,9 @@ class StaticBackground:
             rest = d[outside][::5]
             median = float(np.median(rest))
             sigma = 1.4826 * float(np.median(np.abs(rest - median))) + 1e-3
-            fg = np.clip((d - median - self.k * sigma - self.flicker) / (self.k * sigma), 0.0, 1.0)
-            if self.flicker_gain > 0:
+            threshold = median + self.k * sigma + (self.flicker if self.flicker is not None else 0.0)
+            fg = np.clip((d - threshold) / (self.k * sigma), 0.0, 1.0)
+            if self.flicker is not None:
                 target = self.flicker_gain * np.maximum(d - median, 0.0)
                 self.flicker += np.where(outside & self.known,
                                          np.clip(target - self.flicker, -self.flicker_step, self.flicker_step), 0.0)
@@ -183,7 +184,16 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
     rectangle, that is measured.
     """
     n = GRID_SIDE
-    u, uu, vv, count, labels = _silhouettes(foreground, state, scale, extent, threshold)
+    u = ((np.arange(n) + 0.5) / n - 0.5) * extent
+    uu, vv = np.meshgrid(u, u)
+    grid = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)]).astype(np.float32)
+    affine = (np.asarray(state, dtype=float)[:2, :] * scale).astype(np.float32)
+    affine[:, 2] -= 0.5                             # pixel centres of the scaled image (as warp_patches)
+    maps = affine @ grid
+    patch = cv2.remap(foreground, maps[0].reshape(n, n), maps[1].reshape(n, n), cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    binary = cv2.morphologyEx((patch > threshold).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    count, labels = cv2.connectedComponents(binary, connectivity=8)
     inner = (np.abs(uu) < 0.5) & (np.abs(vv) < 0.5)
     if count <= 1:
         return None
@@ -196,36 +206,13 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
         return None
     if xs.min() == 0 or ys.min() == 0 or xs.max() == n - 1 or ys.max() == n - 1:
         return None
-    return _rectangle(xs, ys, u, extent, state)
-
-
-def _silhouettes(foreground: np.ndarray, state: np.ndarray, scale: float, extent: float, threshold: float):
-    """F sampled on a GRID_SIDE² grid over ``extent`` times the state's template rectangle (template
-    coordinates u, v), thresholded, closed 3x3, and its connected components."""
-    n = GRID_SIDE
-    u = ((np.arange(n) + 0.5) / n - 0.5) * extent
-    uu, vv = np.meshgrid(u, u)
-    grid = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)]).astype(np.float32)
-    affine = (np.asarray(state, dtype=float)[:2, :] * scale).astype(np.float32)
-    affine[:, 2] -= 0.5                             # pixel centres of the scaled image (as warp_patches)
-    maps = affine @ grid
-    patch = cv2.remap(foreground, maps[0].reshape(n, n), maps[1].reshape(n, n), cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    binary = cv2.morphologyEx((patch > threshold).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
-    count, labels = cv2.connectedComponents(binary, connectivity=8)
-    return u, uu, vv, count, labels
-
-
-def _rectangle(xs: np.ndarray, ys: np.ndarray, u: np.ndarray, extent: float, state: np.ndarray) -> Extent:
-    """The bounding rectangle of grid cells (xs, ys) and their principal axis, as an Extent."""
-    cell = extent / GRID_SIDE
-    offsets = np.asarray(state, dtype=float)[:2, :2] @ np.stack([u[xs], u[ys]])     # image pixels
-    evals, evecs = np.linalg.eigh(np.cov(offsets))
-    major = evecs[:, 1]
-    u_axis = np.asarray(state, dtype=float)[:2, 0]
-    angle = float(np.arctan2(major[1], major[0]) - np.arctan2(u_axis[1], u_axis[0]))
+    # principal axis of the silhouette's cells in image pixels, against the template's u axis
+    linear = np.asarray(state, dtype=float)[:2, :2]
+    evals, evecs = np.linalg.eigh(np.cov(linear @ np.stack([u[xs], u[ys]])))
+    angle = float(np.arctan2(evecs[1, 1], evecs[0, 1]) - np.arctan2(linear[1, 0], linear[0, 0]))
     angle = (angle + np.pi / 2) % np.pi - np.pi / 2
     elongation = float(np.sqrt(max(evals[1], 1e-12) / max(evals[0], 1e-12)))
+    cell = extent / n
     u0, u1 = u[xs.min()] - cell / 2, u[xs.max()] + cell / 2
     v0, v1 = u[ys.min()] - cell / 2, u[ys.max()] + cell / 2
     return Extent((u0 + u1) / 2, (v0 + v1) / 2, u1 - u0, v1 - v0, angle, elongation)
