@@ -33,6 +33,7 @@ A node is thin::
 from __future__ import annotations
 
 import array
+import copy
 import dataclasses
 import os
 import sys
@@ -50,6 +51,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
 
 from . import config as config_module
 from .bag import get_message_class
@@ -243,8 +245,9 @@ class PerceptionNode(Node):
         """Declare every config of a ``processing.ProcessorSpec`` and attach the processor it builds:
         the same construction ``run_offline`` uses, so live and offline cannot drift apart."""
         configs = {prefix: self.declare_config(cls, prefix) for prefix, cls in spec.configs.items()}
-        self.check_unknown_parameters()
-        return self.attach_processor(spec.build(configs))
+        processor = self.attach_processor(spec.build(configs))
+        self.check_unknown_parameters()  # after the subscriptions: they declare the qos_overrides.* parameters
+        return processor
 
     def attach_processor(self, processor: MessageProcessor) -> MessageProcessor:
         """Subscribe to the processor's inputs and publish its outputs (see module docstring)."""
@@ -264,10 +267,16 @@ class PerceptionNode(Node):
 
     def create_latest_subscription(self, msg_class: type, topic: str, callback: Callable[[Any], None],
                                    qos: QoSProfile = qos_profile_sensor_data):
-        """Sensor-data QoS; only the newest message is kept and handled off the executor thread."""
+        """Sensor-data QoS; only the newest message is kept and handled off the executor thread.
+
+        The QoS is the standard ROS 2 override point (``qos_overrides.<topic>.subscription.reliability``
+        etc., read-only parameters): best effort by default, as a camera driver publishes; ``reliable``
+        on a lossy link where a lost UDP fragment must not drop a whole frame."""
         slot = _LatestSlot(callback, self.stats, topic)
         self._slots.append(slot)
-        return self.create_subscription(msg_class, topic, slot.offer, qos)
+        # a copy: rclpy writes the overridden policies into the profile it is given (here a module constant)
+        return self.create_subscription(msg_class, topic, slot.offer, copy.copy(qos),
+                                        qos_overriding_options=QoSOverridingOptions.with_default_policies())
 
     def create_image_subscription(self, topic: str, callback: Callable[[Any], None], compressed: bool = False):
         """An image subscription (``sensor_msgs/Image`` or ``CompressedImage``), keep-newest."""

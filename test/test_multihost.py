@@ -70,8 +70,9 @@ class Hosts:
                           args=[bag, "--topics", "image", "--remap", f"image:=/{CAM}/image", "--rate", rate,
                                 "--wait-for-subscribers", wait_s, "--delay", 3])
 
-    def docking_tracker(self, box, log: str = "docking.log") -> NodeProcess:
-        return self.start(self.compute, "docking_tracker_node", log, namespace=CAM, parameters={"initial_box": box})
+    def docking_tracker(self, box, log: str = "docking.log", parameters: dict | None = None) -> NodeProcess:
+        return self.start(self.compute, "docking_tracker_node", log, namespace=CAM,
+                          parameters={"initial_box": box, **(parameters or {})})
 
     def wait_recording(self, *topics: str, timeout_s: float = 60) -> None:
         assert wait_until(lambda: all(f"recording /{CAM}/{t} " in self.log("record.log") for t in topics), timeout_s), \
@@ -111,16 +112,21 @@ def _diagnostics(bag, node: str) -> list[tuple[int, dict]]:
 
 
 def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
-    """Camera host plays, compute host runs detector -> association and the docking tracker, recording
-    host records: no frame is lost between hosts, and the outputs equal run_offline's frame for frame."""
+    """Camera host plays, compute host runs detector -> association and the docking tracker (image
+    subscriptions made reliable by the QoS override), recording host records: no frame is lost between
+    hosts, and the outputs equal run_offline's frame for frame."""
     bag = docking_bag(tmp_path / "docking.mcap", frames=40)
     box = first_polygon_box(bag)
     recording = tmp_path / "rec"
     hosts.record([f"/{CAM}/{t}" for t in ("image", "detections", "tracks", "docking/polygon")] + ["/diagnostics"],
                  recording)
-    hosts.start(hosts.compute, "detector_node", "detector.log", namespace=CAM)
+    # images are best effort by default (sensor data): one UDP fragment lost on a busy host drops the whole
+    # frame, as test_compute_host_packet_loss_then_restart shows. A frame-exact comparison needs the
+    # standard QoS override that makes the image subscriptions reliable.
+    reliable = {f"qos_overrides./{CAM}/image.subscription.reliability": "reliable"}
+    hosts.start(hosts.compute, "detector_node", "detector.log", namespace=CAM, parameters=reliable)
     hosts.start(hosts.compute, "association_node", "association.log", namespace=CAM)
-    hosts.docking_tracker(box)
+    hosts.docking_tracker(box, parameters=reliable)
     hosts.wait_recording("detections", "tracks", "docking/polygon")
     player = hosts.play(bag, 0.2)  # 14 Hz bag: a frame every 0.36 s
     assert player.wait(180) == 0, hosts.log("play.log")

@@ -152,3 +152,30 @@ def test_guard_resets_on_time_jump_and_survives_internal_errors():
     assert stats.time_jumps == 1 and proc.resets == 1
     assert process_guarded(proc, "image", image(1, 99), stats) == []
     assert any("internal error RuntimeError: boom" in r for r in stats.rejected)
+
+
+def test_image_qos_is_best_effort_and_overridable_to_reliable_by_the_standard_parameter():
+    """Sensor-data QoS by default; ``qos_overrides./image.subscription.reliability: reliable`` (the
+    ROS 2 override point, read only) makes the image subscription reliable for a lossy link, and a
+    node built from a spec does not list that override as an unknown parameter."""
+    from rclpy.qos import ReliabilityPolicy
+
+    from aircraft_docking_tracker.processing import ProcessorSpec
+
+    class SpecNode(PerceptionNode):
+        def __init__(self, **kwargs):
+            super().__init__("spec_toy", **kwargs)
+            self.attach_spec(ProcessorSpec("spec_toy", {"": ToyConfig}, lambda c: ToyProcessor(c[""])))
+
+    override = Parameter("qos_overrides./image.subscription.reliability", value="reliable")
+    with ros_context() as (ctx, executor):
+        plain = ToyNode(context=ctx)
+        tuned = SpecNode(context=ctx, parameter_overrides=[override, Parameter("thresold", value=0.3)])
+        try:
+            reliability = {n.get_name(): [s.qos_profile.reliability for s in n.subscriptions if s.topic_name == "/image"]
+                           for n in (plain, tuned)}
+            assert reliability == {"toy": [ReliabilityPolicy.BEST_EFFORT], "spec_toy": [ReliabilityPolicy.RELIABLE]}
+            assert tuned.unknown_parameters == ["thresold"]  # a typo is still caught
+        finally:
+            plain.destroy_node()
+            tuned.destroy_node()
