@@ -326,7 +326,7 @@ class PerceptionNode(Node):
         """Feed rate / latency diagnostics (for nodes that do not use a processor)."""
         age = None
         if input_stamp_ns is not None:
-            age = max(0.0, (self.get_clock().now().nanoseconds - input_stamp_ns) / 1e9)
+            age = (self.get_clock().now().nanoseconds - input_stamp_ns) / 1e9
         self.stats.record(processing_s, age)
 
     # ------------------------------------------------------------------ diagnostics
@@ -337,7 +337,7 @@ class PerceptionNode(Node):
             "processing_ms_p50": f"{summary['processing_ms_p50']:.2f}",
             "processing_ms_p95": f"{summary['processing_ms_p95']:.2f}",
             "processing_ms_max": f"{summary['processing_ms_max']:.2f}",
-            "latency_ms_p50": f"{summary['latency_ms_p50']:.2f}",
+            "latency_ms_p50": _latency_text(summary),
             "received": str(self.stats.received),
             "processed": str(self.stats.processed),
             "skipped": str(self.stats.skipped),
@@ -549,3 +549,13 @@ def run_node(node_class: type, args: list[str] | None = None, **node_kwargs) -> 
     if code:
         raise SystemExit(code)
     return 0
+
+
+def _latency_text(summary: dict[str, float]) -> str:
+    """The stamp-to-output latency for diagnostics, or why there is none (stamps on another clock)."""
+    if "stamp_offset_s" not in summary:
+        return f"{summary['latency_ms_p50']:.2f}"
+    offset = summary["stamp_offset_s"]
+    where = "behind" if offset > 0 else "ahead of"
+    return (f"n/a: input stamps {abs(offset):.3g} s {where} this node's clock (a bag replayed without "
+            f"use_sim_time, or a camera clock not synchronised)")

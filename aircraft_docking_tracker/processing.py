@@ -75,6 +75,10 @@ MAX_REASONS = 64
 OTHER_REASONS = "other reasons (more than 64 kinds)"
 
 
+MAX_LATENCY_S = 60.0    # a median stamp age above this is another clock, not a latency
+MAX_CLOCK_SKEW_S = 1.0  # stamps this far ahead of the node's clock: another clock too
+
+
 @dataclass
 class ProcessingStats:
     """Counters behind ``/diagnostics``: rates, latency, skipped and rejected inputs.
@@ -136,7 +140,10 @@ class ProcessingStats:
 
     def summary(self) -> dict[str, float]:
         """Rate (Hz) over the last ``window_s`` seconds; processing time and stamp latency (ms)
-        percentiles over the last 2000 processed messages."""
+        percentiles over the last 2000 processed messages. A median stamp age beyond
+        ``MAX_LATENCY_S`` (or stamps more than ``MAX_CLOCK_SKEW_S`` ahead) is not a latency: a bag
+        replayed without ``use_sim_time``, or a camera on another clock; the latency is then NaN and
+        ``stamp_offset_s`` says how far behind the node's clock the stamps are."""
         now = time.monotonic()
         out = {"rate_hz": 0.0, "processing_ms_p50": 0.0, "processing_ms_p95": 0.0, "processing_ms_max": 0.0,
                "latency_ms_p50": 0.0}
@@ -148,9 +155,14 @@ class ProcessingStats:
             out["processing_ms_p50"] = proc[len(proc) // 2]
             out["processing_ms_p95"] = proc[min(len(proc) - 1, int(0.95 * len(proc)))]
             out["processing_ms_max"] = proc[-1]
-            ages = sorted(e[2] * 1e3 for e in self._events if e[2] is not None)
+            ages = sorted(e[2] for e in self._events if e[2] is not None)
             if ages:
-                out["latency_ms_p50"] = ages[len(ages) // 2]
+                median = ages[len(ages) // 2]
+                if -MAX_CLOCK_SKEW_S <= median <= MAX_LATENCY_S:
+                    out["latency_ms_p50"] = max(0.0, median) * 1e3
+                else:  # the stamps are not on the node's clock: no latency to report, say how far off they are
+                    out["latency_ms_p50"] = float("nan")
+                    out["stamp_offset_s"] = median
         return out
 
 
@@ -208,7 +220,7 @@ def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: Pr
         return refuse(f"{topic}: internal error {type(exc).__name__}: {exc}", bug=True)
     age = None
     if stamp is not None and now_ns is not None:
-        age = max(0.0, (now_ns() - stamp) / 1e9)
+        age = (now_ns() - stamp) / 1e9  # signed: ProcessingStats.summary tells latency from a foreign clock
     stats.record(time.perf_counter() - started, age)
     return outputs
 

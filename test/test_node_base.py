@@ -179,3 +179,27 @@ def test_image_qos_is_best_effort_and_overridable_to_reliable_by_the_standard_pa
         finally:
             plain.destroy_node()
             tuned.destroy_node()
+
+
+def test_latency_is_reported_for_live_stamps_and_explained_for_stamps_on_another_clock():
+    """Stamp-to-output latency on the node's clock; a bag replayed without use_sim_time (stamps hours
+    old) or a camera clock ahead gives no latency figure but the offset, instead of 1e11 ms."""
+    from aircraft_docking_tracker.node_base import _latency_text
+
+    def median_latency(stamp_age_s: float) -> tuple[dict, str]:
+        stats, now_ns = ProcessingStats(), 5_000_000_000_000
+        for i in range(5):
+            stamp = now_ns - int(stamp_age_s * 1e9) + i
+            process_guarded(ToyProcessor(ToyConfig()), "image", image(100, stamp), stats, now_ns=lambda: now_ns)
+        summary = stats.summary()
+        return summary, _latency_text(summary)
+
+    live, text = median_latency(0.040)
+    assert live["latency_ms_p50"] == pytest.approx(40.0, abs=0.01) and "stamp_offset_s" not in live and text == "40.00"
+    replayed, text = median_latency(3 * 3600.0)
+    assert np.isnan(replayed["latency_ms_p50"]) and replayed["stamp_offset_s"] == pytest.approx(10800.0)
+    assert text.startswith("n/a") and "1.08e+04 s behind" in text and "use_sim_time" in text
+    ahead, text = median_latency(-30.0)
+    assert np.isnan(ahead["latency_ms_p50"]) and "30 s ahead of" in text
+    slightly_ahead, text = median_latency(-0.2)  # within the skew allowed between hosts: latency 0
+    assert slightly_ahead["latency_ms_p50"] == 0.0 and text == "0.00"
