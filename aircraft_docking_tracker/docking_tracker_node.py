@@ -32,11 +32,10 @@ import numpy as np
 
 from .bag import stamp_to_ns
 from .config import param
-from .images import MAX_PIXELS
 from .docking import LOST, STATE_NAMES, TRACKING, WAITING, DockingConfig, DockingResult, DockingTracker, state_row
 from .node_base import PerceptionNode, run_node
 from .object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
-from .processing import MessageProcessor, ProcessorSpec, Rejected, best_rows
+from .processing import DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected, best_rows
 
 NODE_NAME = "docking_tracker"
 NODE_PREFIX = "node."
@@ -45,7 +44,7 @@ _DRAWABLE = 1e6  # pixel coordinates drawn at most this far out (NaN and 1e30 ar
 
 
 @dataclass
-class DockingNodeConfig:
+class DockingNodeConfig(DetectionsLimit, ImageLimit):
     """Message handling around the docking tracker core (topics are fixed at start-up)."""
 
     compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image (start-up only)",
@@ -55,10 +54,6 @@ class DockingNodeConfig:
     annotate_image: bool = param(False, "publish docking/image (bgr8, quadrilateral and particles drawn; start-up "
                                  "only)", read_only=True)
     max_drawn_particles: int = param(300, "particles drawn on docking/image at most", low=0, high=100000)
-    max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) frames of more pixels than this; a compressed "
-                                  "frame's size is read from its header before decoding", low=1, high=400000000)
-    max_detections: int = param(1000, "keep the best this many rows of a detections message (the rest are "
-                                "dropped and counted)", low=1, high=1000000)
 
 
 def draw_docking(bgr: np.ndarray, result: DockingResult, max_particles: int) -> np.ndarray:

@@ -18,8 +18,26 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from .bag import stamp_to_ns
+from .config import param
+from .images import MAX_PIXELS
 
 LOG = logging.getLogger(__name__)
+
+
+@dataclass
+class ImageLimit:
+    """The bound on the work one image may cost; a node's config inherits it (``node.max_image_pixels``)."""
+
+    max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) images of more pixels than this; a compressed "
+                                  "image's size is read from its header before decoding", low=1, high=400000000)
+
+
+@dataclass
+class DetectionsLimit:
+    """The bound on the rows one detections message may bring (``node.max_detections``); see :func:`best_rows`."""
+
+    max_detections: int = param(1000, "keep the best this many rows of a detections message (the rest are "
+                                "dropped and counted)", low=1, high=1000000)
 
 
 class Rejected(ValueError):

@@ -30,11 +30,11 @@ import numpy as np
 
 from aircraft_docking_tracker.bag import stamp_to_ns
 from aircraft_docking_tracker.config import param
-from aircraft_docking_tracker.images import MAX_PIXELS
 from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
-from aircraft_docking_tracker.processing import MessageProcessor, ProcessorSpec, Rejected, best_rows
+from aircraft_docking_tracker.processing import (DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected,
+                                                 best_rows)
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker, Tracks
 from multi_target_tracker.kalman import KalmanConfig
 from multi_target_tracker.mot_track import KALMAN_PREFIX, NODE_NAME
@@ -56,13 +56,8 @@ class AssociationOutputConfig:
 
 
 @dataclass
-class AssociationNodeConfig:
-    """Bounds on the work one input message may cost (apply at once)."""
-
-    max_detections: int = param(1000, "keep the best this many rows of a detections message (the rest are "
-                                "dropped and counted)", low=1, high=1000000)
-    max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) images of more pixels than this "
-                                  "(output.annotate_image)", low=1, high=400000000)
+class AssociationNodeConfig(ImageLimit, DetectionsLimit):
+    """Bounds on the work one input message may cost (apply at once; images: output.annotate_image)."""
 
 
 def tracks_to_table(tracks: Tracks) -> np.ndarray:

@@ -24,11 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from aircraft_docking_tracker.config import param
-from aircraft_docking_tracker.images import MAX_PIXELS
 from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import table_to_cloud
-from aircraft_docking_tracker.processing import ERROR, MessageProcessor, ProcessorSpec, Rejected
+from aircraft_docking_tracker.processing import ERROR, ImageLimit, MessageProcessor, ProcessorSpec, Rejected
 from multi_target_tracker.detector import Detector, DetectorConfig
 
 NODE_NAME = "detector"
@@ -36,7 +35,7 @@ NODE_PREFIX = "node."
 
 
 @dataclass
-class DetectorNodeConfig:
+class DetectorNodeConfig(ImageLimit):
     """Message handling around the detector core (topics are fixed at start-up)."""
 
     compressed: bool = param(False, "subscribe to sensor_msgs/CompressedImage instead of Image (start-up only)",
@@ -44,8 +43,6 @@ class DetectorNodeConfig:
     frame_stride: int = param(1, "detect on every k-th received frame (others are passed over)", low=1, high=1000)
     annotate_image: bool = param(False, "publish detections/image (bgr8 with the boxes drawn; start-up only)",
                                  read_only=True)
-    max_image_pixels: int = param(MAX_PIXELS, "refuse (count, log) frames of more pixels than this; a compressed "
-                                  "frame's size is read from its header before decoding", low=1, high=400000000)
 
 
 def draw_detections(bgr: np.ndarray, table: np.ndarray) -> np.ndarray:
