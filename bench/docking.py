@@ -370,7 +370,7 @@ def run_candidates(n_scenes: int, seeds: int, frames: int) -> None:
         table.append({"tracker": label, "start": start, "runs": len(rs), "auc_ge_05": float(np.mean(a >= 0.5)),
                       "median_auc": float(np.median(a)), "mean_auc": float(np.mean(a)), "worst_auc": float(a.min()),
                       "stop_iou_median": float(np.median([r["stop_iou"] for r in rs])),
-                      "fps": float(np.median([r["fps"] for r in rs])) if "oracle" not in label else None,
+                      "fps": fps_of([r["fps"] for r in rs], np.median) if "oracle" not in label else None,
                       "auc": a.tolist()})
     payload = {"scenes": n_scenes, "seeds": seeds, "frames": frames, "candidate": CANDIDATE, "rows": table,
                "runtime_s": time.time() - started, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
@@ -411,8 +411,13 @@ def score(seq: dict, out: dict) -> dict:
         s = score_sequence(pred, seq["gt_quads"])
     else:
         s = score_sequence(out["boxes"], seq["gt_boxes"])
-    times = out["times"][1:]
-    row = {"success_auc": s["success_auc"], "precision": s["precision"], "fps": fps(times[times > 0]),
+    # the tracker's update alone: frames after the start (a detector start waits, and a run that never
+    # starts has no tracking speed; its waiting frames timed the start check only)
+    first = 1 if out.get("started_at", 0) is not None else len(out["times"])
+    first = max(first, int(out.get("started_at") or 0) + 1)
+    times = out["times"][first:]
+    times = times[times > 0]
+    row = {"success_auc": s["success_auc"], "precision": s["precision"], "fps": fps(times) if len(times) else None,
            "success_curve": s["success_curve"], "frames": len(out["boxes"])}
     if "particles" in out:
         row["particles_mean"] = float(np.nanmean(out["particles"][1:]))
@@ -428,10 +433,21 @@ def score(seq: dict, out: dict) -> dict:
     return row
 
 
+def fps_of(values, statistic=np.mean) -> float | None:
+    """``statistic`` of the runs' tracking speeds; runs that never started (fps None) have none."""
+    timed = [v for v in values if v is not None]
+    return float(statistic(timed)) if timed else None
+
+
+def fps_text(value: float | None, spec: str = ".1f") -> str:
+    return "-" if value is None else format(value, spec)
+
+
 def aggregate(rows: list[dict]) -> dict:
     """Mean over tracker seeds of each score, the AUC's spread and each seed's AUC."""
     row = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]
-           if k not in ("success_curve",) and all(k in r for r in rows)}
+           if k not in ("success_curve", "fps") and all(k in r for r in rows)}
+    row["fps"] = fps_of([r["fps"] for r in rows])
     row["success_curve"] = np.mean([r["success_curve"] for r in rows], axis=0).tolist()
     row["success_auc_std"] = float(np.std([r["success_auc"] for r in rows]))
     row["success_auc_seeds"] = [r["success_auc"] for r in rows]
@@ -486,14 +502,15 @@ def main() -> int:
                 row = aggregate([score(seq, run_ours(seq, overrides, s, start)) for s in range(n)])
                 results[seq["name"]]["trackers"][label] = row
                 print(f"{seq['name']:40s} {label:48s} AUC {row['success_auc']:.3f}±{row['success_auc_std']:.3f} "
-                      f"{row['fps']:7.1f} fps  [{time.time() - started:.0f} s]", flush=True)
+                      f"{fps_text(row['fps'], '7.1f')} fps  [{time.time() - started:.0f} s]", flush=True)
             for name in peers:
                 out = run_peer(seq, name, tmp)
                 if out is None:
                     continue
                 row = score(seq, out)
                 results[seq["name"]]["trackers"][name] = row
-                print(f"{seq['name']:40s} {name:48s} AUC {row['success_auc']:.3f} {row['fps']:7.1f} fps", flush=True)
+                print(f"{seq['name']:40s} {name:48s} AUC {row['success_auc']:.3f} {fps_text(row['fps'], '7.1f')} fps",
+                      flush=True)
     labels = [j[0] for j in jobs] + [j[0] for j in start_jobs] + peers
     summary = summarise(results, labels, [j[0] for j in jobs])
     (HERE / "results").mkdir(exist_ok=True)
@@ -522,7 +539,7 @@ def summarise(results: dict, labels: list[str], candidates: list[str]) -> dict:
             runs = np.concatenate([r.get("success_auc_seeds", [r["success_auc"]]) for r in rows])
             entry = {"mean_auc": float(np.mean(runs)), "median_auc": float(np.median(runs)),
                      "worst_auc": float(np.min(runs)), "runs": int(len(runs)),
-                     "runs_auc_ge_0.5": float(np.mean(runs >= 0.5)), "fps": float(np.mean([r["fps"] for r in rows])),
+                     "runs_auc_ge_0.5": float(np.mean(runs >= 0.5)), "fps": fps_of([r["fps"] for r in rows]),
                      "seed_std": float(np.mean([r.get("success_auc_std", 0.0) for r in rows]))}
             for k in ("stop_iou", "stop_aspect_error", "stop_skew_deg"):
                 if all(k in r for r in rows):
@@ -578,7 +595,7 @@ def markdown(results: dict, summary: dict, labels: list[str], payload: dict) -> 
             g = lambda k, f="{:.3f}": f.format(e[k]) if k in e else ""  # noqa: E731
             lines.append(f"| {label} | {e['runs']} | {e['runs_auc_ge_0.5']:.0%} | {e['median_auc']:.3f} | "
                          f"{e['mean_auc']:.3f} | {e['worst_auc']:.3f} | {e['seed_std']:.3f} | {g('median_stop_iou')} | "
-                         f"{g('median_stop_aspect_error')} | {g('median_stop_skew_deg', '{:.1f}')} | {e['fps']:.0f} |")
+                         f"{g('median_stop_aspect_error')} | {g('median_stop_skew_deg', '{:.1f}')} | {fps_text(e['fps'], '.0f')} |")
         lines.append("")
     if summary.get("real_vs_csrt"):
         lines += ["### Real sequences against CSRT (rigid: Car4, Car1, CarChase2, building4)", "",
@@ -597,7 +614,7 @@ def markdown(results: dict, summary: dict, labels: list[str], payload: dict) -> 
             spread = f" ± {r['success_auc_std']:.3f}" if "success_auc_std" in r else ""
             parts = f"{r['particles_mean']:.0f}" if "particles_mean" in r else ""
             stop = f"{r['stop_iou']:.2f}" if "stop_iou" in r else ""
-            lines.append(f"| {name} | {label} | {r['success_auc']:.3f}{spread} | {r['precision']:.3f} | {r['fps']:.1f} | "
+            lines.append(f"| {name} | {label} | {r['success_auc']:.3f}{spread} | {r['precision']:.3f} | {fps_text(r['fps'])} | "
                          f"{parts} | {stop} |")
     return "\n".join(lines) + "\n"
 
@@ -651,7 +668,7 @@ def plot(results: dict, labels: list[str]) -> None:
     fig.savefig(HERE / "plots" / "docking_synthetic_runs.png", dpi=80)
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(8, 4))
-    grouped_bars(ax, real, {label: [results[n]["trackers"].get(label, {}).get("fps", 0.0) for n in real]
+    grouped_bars(ax, real, {label: [results[n]["trackers"].get(label, {}).get("fps") or 0.0 for n in real]
                             for label in main_labels}, rotation=20, fontsize=7, ha="right")
     ax.set_ylabel("frames/s (one core, tracker only)")
     ax.set_yscale("log")
