@@ -214,7 +214,7 @@ def choose_grouping(config: DetectorConfig, raws_by_fold: list, rule: str = None
     ``worst-fold`` (the default, ``CHOICE_RULE``): the highest *worst* fold's detection rate with every fold
     at <= CHOICE_FALSE_ALARMS false alarms: the setting must hold on each group of videos, as it must on the
     videos we do not have. ``pooled`` (sessions 4-5): the highest detection rate at <= CHOICE_FALSE_ALARMS
-    over all inner tiles pooled; the largest fold then outvotes the others. If nothing meets the false-alarm
+    over all inner tiles pooled; a setting that suits the pooled tiles can still fail on one video. If nothing meets the false-alarm
     bound: the fewest (worst-fold or pooled) false alarms. Worst-fold ties: fewer false alarms, then more
     neighbours, then a higher margin."""
     rule = rule or CHOICE_RULE

@@ -75,7 +75,7 @@ class DetectorConfig:
                                "for the shipped drone-view model)", low=1, high=100)
     containment: float = param(0.4, "drop a group lying this much inside a better one (intersection over the "
                                "smaller box; 1: never)", low=0.0, high=1.0)
-    window_margin: float = param(-1.0, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
+    window_margin: float = param(-0.5, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
                                  "windows, >0 fewer; default chosen by k-fold by video for the shipped drone-view "
                                  "model)", low=-100.0, high=100.0)
     box_scale: float = param(1.0, "each detection box is scaled about its centre by this factor (a cascade fires "
