@@ -93,8 +93,8 @@ def main(argv=None) -> int:
     parser.add_argument("--ground-resolution", type=float, default=UAV_SETUP_GROUND_RESOLUTION)
     parser.add_argument("--frames", type=int, default=80, help="frames per scene (as long as the demo's: the "
                         "canopies that hide a vehicle grow with the scene's length, and they are the hardest negatives)")
-    parser.add_argument("--context", type=float, default=1.3, help="vehicle windows enlarged this much about their "
-                        "centre (ground around the vehicle)")
+    parser.add_argument("--context", type=float, default=None, help="vehicle windows enlarged this much about their "
+                        "centre (ground around the vehicle; default 1.3, with --heading 1.25)")
     parser.add_argument("--every", type=int, default=16, help="write every k-th frame (the middle one of each k)")
     parser.add_argument("--heading", action="store_true", help="heading-aligned chips as the positives, the frames "
                         "(every vehicle ignored) as the negatives; see the module docstring")
@@ -102,8 +102,8 @@ def main(argv=None) -> int:
     parser.add_argument("--turn-jitter", type=float, default=22.5, help="--heading: chips turned up to this many "
                         "degrees off the vehicle's axis (half the detector's angle step)")
     args = parser.parse_args(argv)
-    if args.heading and args.context == 1.3 and "--context" not in (argv or sys.argv):
-        args.context = 1.25
+    if args.context is None:     # the shipped models': 1.3 (upright, uav_vehicles_low), 1.25 (heading-aligned)
+        args.context = 1.25 if args.heading else 1.3
     seeds = range(args.seeds[0], args.seeds[1] + 1)
     if seeds.start not in UAV_TRAIN_SEEDS or seeds[-1] not in UAV_TRAIN_SEEDS:
         parser.error(f"training seeds must lie in {UAV_TRAIN_SEEDS} (tuning and evaluation seeds are kept out)")
