@@ -10,6 +10,11 @@ pixels is searched at scales ``s = s_min * scale_factor^k`` between ``min_size``
 that level is scored at once by :class:`features.LevelScan` (its tables and compiled cascade loop).
 With ``orientation = both`` the transposed frame is scanned too (objects turned by 90 degrees,
 e.g. cars along the other street axis seen from a UAV).
+With ``angles`` (default ``[0]``) the frame is also scanned turned by each angle about its centre
+(:func:`turned_view`, on a canvas that holds all of it): a model trained on heading-aligned vehicles
+(the UAV set-up's) then meets vehicles at any heading within half an angle step of one of its views;
+each window of a turned view is mapped back as the upright box of its turned corners
+(:func:`map_back`), the box the ground truth gives a turned vehicle, before grouping.
 
 Grouping (:func:`group_windows`, after OpenCV's ``groupRectangles``): a cascade fires on many
 windows around one object, shifted by the stride and a scale step. Windows are taken best
@@ -68,6 +73,10 @@ class DetectorConfig:
                             "for, else up to the frame)", low=0.0, high=10000.0)
     orientation: str = param("model", "also scan the transposed frame: model (as trained), upright, both",
                              choices=("model", "upright", "both"))
+    angles: list = param([0.0], "scan the frame turned by each of these angles [deg] (with orientation both, "
+                         "each also transposed: angles [0, 45] look along 0, 45, 90 and 135 degrees, for a model "
+                         "trained on heading-aligned vehicles); a turned view's windows are mapped back as the "
+                         "upright boxes of the turned windows; cascade backend only")
     group_iou: float = param(0.3, "a window joins a group when it overlaps the group's best window by this "
                              "IoU", low=0.0, high=1.0)
     min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
@@ -98,6 +107,12 @@ class DetectorConfig:
         roi = list(self.roi)
         if len(roi) != 4 or any(v != int(v) for v in roi) or roi[2] < 0 or roi[3] < 0:
             raise ConfigError(f"roi must be 4 whole numbers x, y, w, h with w, h >= 0, got {roi}", ("roi",))
+        angles = list(self.angles)
+        if not angles or len(angles) > 8 or any(not isinstance(a, (int, float)) or not -180.0 <= float(a) <= 180.0
+                                                 for a in angles):
+            raise ConfigError(f"angles must be 1-8 numbers in [-180, 180] degrees, got {angles}", ("angles",))
+        if self.backend == "opencv" and any(a != 0 for a in angles):
+            raise ConfigError("angles other than 0 need the cascade backend", ("angles", "backend"))
         if self.min_size > 0 and self.max_size > 0 and self.min_size > self.max_size:
             raise ConfigError(f"min_size={self.min_size} must not exceed max_size={self.max_size}",
                               ("min_size", "max_size"))
@@ -181,6 +196,37 @@ def window_scales(window: tuple[int, int], frame_size: tuple[int, int], scale_fa
         scales.append(s)
         s *= scale_factor
     return scales
+
+
+def turned_view(gray: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """``gray`` turned by ``angle`` degrees about its centre on a canvas that holds all of it (borders
+    reflected), and the 2x3 affine map from the canvas back to ``gray`` (None for angle 0)."""
+    if angle % 360 == 0:
+        return gray, None
+    h, w = gray.shape
+    c, s = abs(np.cos(np.radians(angle))), abs(np.sin(np.radians(angle)))
+    size = (int(np.ceil(w * c + h * s)), int(np.ceil(w * s + h * c)))
+    turn = cv2.getRotationMatrix2D((w / 2, h / 2), float(angle), 1.0)
+    turn[:, 2] += (size[0] / 2 - w / 2, size[1] / 2 - h / 2)
+    view = cv2.warpAffine(gray, turn, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    return view, cv2.invertAffineTransform(turn)
+
+
+def map_back(boxes: np.ndarray, scores: np.ndarray, back: np.ndarray, frame_size: tuple[int, int]):
+    """Windows of a turned view (x, y, w, h in its pixels) as the upright boxes of their turned corners in
+    the frame, clipped to it; windows whose centre falls outside the frame are dropped."""
+    if back is None or not len(boxes):
+        return boxes, scores
+    x, y, w, h = boxes.T
+    corners = np.stack([np.stack([x, y], 1), np.stack([x + w, y], 1), np.stack([x + w, y + h], 1),
+                        np.stack([x, y + h], 1)], 1)                      # (n, 4, 2)
+    mapped = corners @ back[:, :2].T + back[:, 2]
+    lo, hi = mapped.min(axis=1), mapped.max(axis=1)
+    centre = (lo + hi) / 2
+    width, height = frame_size
+    inside = (centre[:, 0] >= 0) & (centre[:, 0] < width) & (centre[:, 1] >= 0) & (centre[:, 1] < height)
+    lo, hi = np.maximum(lo[inside], 0), np.minimum(hi[inside], (width, height))
+    return np.column_stack([lo, hi - lo]), scores[inside]
 
 
 def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4, last_stage_margin: float = 0.0,
@@ -337,6 +383,7 @@ class Detector:
         if orientation == "model":
             orientation = "both" if (self.cascade is not None and self.cascade.rotate90) else "upright"
         self.both_orientations = orientation == "both"
+        self.angles = sorted({float(a) for a in cfg.angles}) if self.cascade is not None else [0.0]
         self.pool = ThreadPoolExecutor(cfg.threads, "detector") if cfg.threads > 1 else None
 
     def raw(self, gray: np.ndarray, last_stage_margin: float | None = None):
@@ -345,14 +392,19 @@ class Detector:
         margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
         views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         if self.cascade is not None:   # every (view, level) is one job; merged in job order either way
-            jobs = [(view, transposed, scale) for view, transposed in views
+            turned = [turned_view(gray, angle) for angle in self.angles]
+            views = [(np.ascontiguousarray(v.T) if transposed else v, transposed, back) for v, back in turned
+                     for transposed in ((False, True) if self.both_orientations else (False,))]
+            jobs = [(view, transposed, back, scale) for view, transposed, back in views
                     for scale in window_scales(self.window, view.shape[::-1], cfg.scale_factor, self.min_size,
                                                self.max_size)]
-            scan = lambda job: scan_level(job[0], self.cascade, job[2], cfg.stride, margin)  # noqa: E731
+            scan = lambda job: scan_level(job[0], self.cascade, job[3], cfg.stride, margin)  # noqa: E731
             levels = list(self.pool.map(scan, jobs) if self.pool is not None else map(scan, jobs))
-            boxes = [b[:, [1, 0, 3, 2]] if job[1] else b for job, (b, _, _) in zip(jobs, levels)]
-            return (np.vstack(boxes) if boxes else np.zeros((0, 4)),
-                    np.concatenate([sc for _, sc, _ in levels]) if levels else np.zeros(0))
+            frame = gray.shape[::-1]
+            mapped = [map_back(b[:, [1, 0, 3, 2]] if job[1] else b, sc, job[2], frame)
+                      for job, (b, sc, _) in zip(jobs, levels)]
+            return (np.vstack([b for b, _ in mapped]) if mapped else np.zeros((0, 4)),
+                    np.concatenate([sc for _, sc in mapped]) if mapped else np.zeros(0))
         all_boxes, all_scores = [], []
         for view, transposed in views:
             boxes, scores = self.opencv.detect(view, cfg.scale_factor, cfg.min_neighbors, self.min_size, self.max_size)

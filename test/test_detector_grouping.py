@@ -1,5 +1,6 @@
 """The compiled grouping (group_windows, suppress_contained) gives exactly what the plain Python
 greedy loops it replaced gave, on the raw windows of real drone-view tiles and on random boxes."""
+import cv2
 import numpy as np
 import pytest
 from scipy.special import expit
@@ -96,3 +97,28 @@ def test_grouping_matches_the_python_loop_on_random_boxes(seed):
         for limit in (None, 7):
             assert suppress_contained(boxes, scores, settings["containment"], limit).tolist() == \
                 suppress_reference(boxes, scores, settings["containment"], limit).tolist()
+
+
+@pytest.mark.parametrize("angle", [45.0, -30.0, 135.0])
+def test_turned_view_maps_an_aligned_window_back_to_the_objects_upright_box(angle):
+    """A bar turned by ``angle`` in the frame lies along x in the view turned by ``angle``; its box there,
+    mapped back, is the bar's upright box in the frame (what the ground truth boxes); windows whose
+    centre falls in the view's reflected border are dropped."""
+    from multi_target_tracker.detector import map_back, turned_view
+
+    gray = np.zeros((240, 320), np.uint8)
+    corners = cv2.boxPoints(((150.0, 110.0), (80.0, 30.0), angle))   # along x turned by angle (y down)
+    cv2.fillConvexPoly(gray, np.round(corners).astype(np.int32), 255)
+    view, back = turned_view(gray, angle)
+    forward = cv2.invertAffineTransform(back)
+    cx, cy = forward[:, :2] @ (150.0, 110.0) + forward[:, 2]
+    _, labels = cv2.connectedComponents((view > 128).astype(np.uint8))   # the border reflects copies of it
+    ys, xs = np.nonzero(labels == labels[int(round(cy)), int(round(cx))])
+    aligned = np.array([[xs.min(), ys.min(), xs.max() - xs.min() + 1, ys.max() - ys.min() + 1]], float)
+    assert aligned[0, 2] == pytest.approx(80, abs=3) and aligned[0, 3] == pytest.approx(30, abs=3)  # along x
+    boxes, scores = map_back(aligned, np.ones(1), back, (320, 240))
+    truth = np.r_[corners.min(axis=0), corners.max(axis=0) - corners.min(axis=0)]
+    assert len(boxes) == 1 and box_iou(boxes[0], truth) > 0.9
+    outside = np.array([[0.0, 0.0, 20.0, 20.0]])                        # the view's corner: reflected border
+    assert len(map_back(outside, np.ones(1), back, (320, 240))[0]) == 0
+    assert turned_view(gray, 0.0)[1] is None and turned_view(gray, 0.0)[0] is gray

@@ -17,12 +17,16 @@ from aircraft_docking_tracker.scenarios.uav import (
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig,
     detection_truth)
 from multi_target_tracker.cascade import Cascade
-from multi_target_tracker.detector import DetectorConfig, resolve_model
+from multi_target_tracker.detector import Detector, DetectorConfig, resolve_model
 
 SETUP = package_config_dir() / "uav_camera.yaml"
-# pooled over seeds 3900-3903 the set-up measured detection 0.33 at false alarms 0.74 (3904-3907: 0.28 / 0.74,
-# 3908-3911: 0.48 / 0.64): far from issue 12's 0.85 / 0.15; these bounds keep a margin under that
-MIN_DETECTION, MAX_FALSE_ALARMS = 0.15, 0.9
+# pooled over seeds 3900-3903 the set-up measured detection 0.52 at false alarms 0.48 (3904-3907: 0.47 / 0.57,
+# 3908-3911: 0.57 / 0.58; the previous upright model: 0.33 / 0.74, 0.28 / 0.74, 0.48 / 0.64): still far from
+# issue 12's 0.85 / 0.15; these bounds keep a margin under what it measures
+MIN_DETECTION, MAX_FALSE_ALARMS = 0.35, 0.7
+# the previous set-up (upright 3:2 windows, vehicles at any heading in them; bench/uav_detector.py UPRIGHT)
+UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
+           "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +43,9 @@ def test_uav_setup_validates_and_bounds_the_search_to_the_altitudes_vehicle_size
     assert detector.min_size == cfg.min_size and detector.max_size == cfg.max_size
     model = Cascade.load(resolve_model(cfg.model))
     assert model.feature_set == "fused" and model.rotate90
-    assert cfg.min_size >= model.window[1]                              # no upsampled pyramid level
+    assert model.window[0] == 2 * model.window[1]                       # heading-aligned: along the vehicle
+    assert sorted(cfg.angles) == [0.0, 45.0] and detector.both_orientations   # 0, 45, 90, 135 degrees
+    assert cfg.min_size >= model.window[1]                              # no window below the model's
     assert resolve_model(cfg.model).stat().st_size < 5_000_000
 
 
@@ -65,10 +71,15 @@ def _counts(detector, seed: int) -> tuple[int, int, int]:
 
 def test_uav_setup_detects_the_vehicles_of_held_out_scenes(detector):
     """Pooled over four held-out scenes (a scene at this altitude shows only a few vehicles at a time).
-    Far below issue 12's targets (see README): the bounds only say the set-up finds vehicles at all
-    and is not drowned in false alarms, with margin under what bench/uav_detector.py measures."""
+    Below issue 12's targets (see README): the bounds say the set-up finds half the vehicles and is not
+    drowned in false alarms, with margin under what bench/uav_detector.py measures; and that it beats
+    the previous upright-window set-up side by side on both rates."""
     counts = np.array([_counts(detector, seed) for seed in UAV_EVAL_SEEDS[900:904]])
     vehicles, detections, true = counts.sum(axis=0)
     assert vehicles >= 20, counts
     assert true / vehicles >= MIN_DETECTION, counts
     assert 1 - true / max(detections, 1) <= MAX_FALSE_ALARMS, counts
+    upright = np.array([_counts(Detector(DetectorConfig(**UPRIGHT)), seed) for seed in UAV_EVAL_SEEDS[900:904]])
+    u_vehicles, u_detections, u_true = upright.sum(axis=0)
+    assert true / vehicles >= u_true / u_vehicles + 0.08, (counts, upright)
+    assert 1 - true / max(detections, 1) <= 1 - u_true / max(u_detections, 1) - 0.1, (counts, upright)
