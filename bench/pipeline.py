@@ -109,7 +109,7 @@ def use_transport(name: str) -> str:
 
 # ---------------------------------------------------------------------------------- shared helpers
 # The cascade for UAV scenes at the scene's own height (ground_resolution 1), which this bench plays; the
-# UAV set-up (config/uav_camera.yaml) flies 3x lower with uav_vehicles_low.json (bench/uav_detector.py).
+# UAV set-up (config/uav_camera.yaml) flies 3x lower with uav_vehicles_heading.json (bench/uav_detector.py).
 UAV_MODEL = "uav_vehicles_fused.json"
 def detector_parameters() -> dict:
     """The UAV cascade for the bench's scene height (``UAV_MODEL``) if shipped, else the
