@@ -153,7 +153,7 @@ def docking_sequences(tmp: Path, count: int, frames: int, seed0: int = REPORT_SE
 # Trackers
 # ================================================================================================
 SEED_PRESET = dict(chart="unit", ar_dims="all", estimate="best", update_rule="background", anchor_weight=0.0,
-                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0)
+                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0, motion_gain=0.0)
 ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 undone, or an option tried)
     "ISPF, seed's choices (docking_tracker_seed.yaml)": SEED_PRESET,
     "ISPF, argmax estimate": {"estimate": "best"},
@@ -164,6 +164,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, anchor term β=0.3": {"anchor_weight": 0.3},
     "ISPF, tune all 6 (Li et al.)": {"tune_dims": "all"},
     "ISPF, no static-camera extent": {"extent_gain": 0.0},
+    "ISPF, no target motion": {"motion_gain": 0.0},
     "ISPF, extent turned to the silhouette's axis": {"extent_rotation": 0.05},
     "ISPF, per-pixel flicker threshold": {"flicker_gain": 2.0},
     "ISPF, aspect pull 0.03": {"aspect_pull": 0.03},
