@@ -435,9 +435,10 @@ class AffineParticleFilter:
             estimate, score, patch = self._check_scale(estimate, score, patch)
         if self.config.motion_gain > 0 and self.background.motion is not None:
             step = self._motion_correction(estimate)
-            estimate, states = estimate @ step, states @ step
-            moved_score, moved_patch = self._score(estimate[None])
-            score, patch = float(moved_score[0]), moved_patch[0]
+            if self._valid((estimate @ step)[None])[0]:
+                estimate, states = estimate @ step, states @ step
+                moved_score, moved_patch = self._score(estimate[None])
+                score, patch = float(moved_score[0]), moved_patch[0]
         correction = self._extent_correction(estimate) if self.config.extent_gain > 0 else None
         if correction is not None:          # kept unless it costs the appearance more than extent_max_drop
             moved = estimate @ correction

@@ -272,6 +272,8 @@ def target_motion(previous: np.ndarray, image: np.ndarray, state: np.ndarray, sc
                                                ransacReprojThreshold=fit_threshold)
     if fit is None or inliers is None or inliers.sum() < min_points:
         return None
+    if not 0.8 < np.sqrt(abs(np.linalg.det(fit[:, :2]))) < 1.25:      # no aircraft grows 25 % in a frame
+        return None
     ring_good = good[count:]
     if ring_good.sum() >= min_points:          # the surroundings move the same way: a camera that follows the target
         p, q = points[count:][ring_good][:, 0], moved[count:][ring_good][:, 0]
