@@ -557,7 +557,7 @@ def markdown(results: dict, summary: dict, labels: list[str], payload: dict) -> 
              f"{'Quick run. ' if quick else ''}Real sequences: first {payload['real_frames']} frames, from the "
              "ground truth's first box, box IoU. Synthetic approaches: seeds 200.. of 150 frames and, 2.5x faster, "
              f"seeds {FAST_SEED0}.. of {FAST_FRAMES} frames (parameters were chosen on seeds 100-105, the "
-             "static-camera extent on 100-119, all 150 frames), 640x480, polygon IoU of our quadrilateral (OpenCV trackers: their box) against the true "
+             "static-camera extent on 100-119, all 150 frames, the target motion on 100-119 and 150-159 of 60 frames), 640x480, polygon IoU of our quadrilateral (OpenCV trackers: their box) against the true "
              "one; default start = the first polygon's axis-aligned box (a loose box). One core for every tracker; "
              f"frames/s of the update alone. ISPF: {payload['seeds']} tracker seeds; ablations and PF: "
              f"{payload['ablation_seeds']}; OpenCV trackers are deterministic. Bench runtime "
