@@ -153,7 +153,7 @@ def docking_sequences(tmp: Path, count: int, frames: int, seed0: int = REPORT_SE
 # Trackers
 # ================================================================================================
 SEED_PRESET = dict(chart="unit", ar_dims="all", estimate="best", update_rule="background", anchor_weight=0.0,
-                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0)
+                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0, motion_gain=0.0)
 ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 undone, or an option tried)
     "ISPF, seed's choices (docking_tracker_seed.yaml)": SEED_PRESET,
     "ISPF, argmax estimate": {"estimate": "best"},
@@ -164,6 +164,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, anchor term β=0.3": {"anchor_weight": 0.3},
     "ISPF, tune all 6 (Li et al.)": {"tune_dims": "all"},
     "ISPF, no static-camera extent": {"extent_gain": 0.0},
+    "ISPF, no target motion": {"motion_gain": 0.0},
     "ISPF, extent turned to the silhouette's axis": {"extent_rotation": 0.05},
     "ISPF, per-pixel flicker threshold": {"flicker_gain": 2.0},
     "ISPF, aspect pull 0.03": {"aspect_pull": 0.03},
@@ -573,7 +574,7 @@ def markdown(results: dict, summary: dict, labels: list[str], payload: dict) -> 
              f"{'Quick run. ' if quick else ''}Real sequences: first {payload['real_frames']} frames, from the "
              "ground truth's first box, box IoU. Synthetic approaches: seeds 200.. of 150 frames and, 2.5x faster, "
              f"seeds {FAST_SEED0}.. of {FAST_FRAMES} frames (parameters were chosen on seeds 100-105, the "
-             "static-camera extent on 100-119, all 150 frames), 640x480, polygon IoU of our quadrilateral (OpenCV trackers: their box) against the true "
+             "static-camera extent on 100-119, all 150 frames, the target motion on 100-119 and 150-159 of 60 frames), 640x480, polygon IoU of our quadrilateral (OpenCV trackers: their box) against the true "
              "one; default start = the first polygon's axis-aligned box (a loose box). One core for every tracker; "
              f"frames/s of the update alone. ISPF: {payload['seeds']} tracker seeds; ablations and PF: "
              f"{payload['ablation_seeds']}; OpenCV trackers are deterministic. Bench runtime "

@@ -156,7 +156,7 @@ def test_seed_preset_selects_the_seeds_choices():
     config = DockingConfig(**params)
     assert (config.chart, config.ar_dims, config.estimate, config.update_rule) == ("unit", "all", "best", "background")
     assert config.skew_pull == config.aspect_pull == config.tune_min_gain == config.anchor_weight == 0.0
-    assert config.extent_gain == 0.0
+    assert config.extent_gain == config.motion_gain == 0.0
 
 
 def test_status_reports_the_static_camera_extent_counts():
