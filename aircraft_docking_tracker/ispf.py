@@ -61,8 +61,9 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
 * ``motion_gain`` (static camera, on by default; session 6): the target's own motion between the
   previous frame and this one, M (``static_background.target_motion``: corners under X̂_{t-1} that
   moved, Lucas-Kanade, a similarity fitted with RANSAC), replaces the AR momentum of eq. 4 (the
-  particles start at M X), and after step 7 X̂ moves part of the way to M X̂_{t-1} (``_motion_correction``)
-  before the extent correction. On a fast approach (the aircraft moves a tenth of its width a frame)
+  particles start at M X), and after step 7 X̂'s centre moves part of the way to M X̂_{t-1}'s
+  (``_motion_correction``; ``motion_pull`` translation: pulling the whole similarity carried the
+  previous estimate's scale error forward) before the extent correction. On a fast approach (the aircraft moves a tenth of its width a frame)
   the particles' noise does not reach the aircraft, and from a loose box, half background, the
   appearance scores the start's background as high as the aircraft: the track stayed there.
 * The frame is sampled from the pyramid level (``cv2.pyrDown``) where the target is about
@@ -156,6 +157,9 @@ class FilterConfig(AppearanceConfig):
                                  "offset = X̂'s centre "
                                  "from the motion's prediction in object sizes (an appearance that jumps away from "
                                  "what the target's pixels did is pulled back)", low=0.05, high=10.0)
+    motion_pull: str = param("translation", "static camera: what of the measured motion pulls X̂: similarity "
+                             "(centre, scale and rotation) or translation (the centre only; scale and shape are "
+                             "left to the appearance and the extent)", choices=("similarity", "translation"))
     extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
                                    "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
     background_step: float = param(2.0, "static camera: grey levels per frame the background moves toward the "
@@ -412,8 +416,8 @@ class AffineParticleFilter:
         return ag.expm(self.config.extent_gain * ag.logm(ag.inverse(estimate) @ measured))
 
     def _motion_correction(self, estimate: np.ndarray) -> np.ndarray:
-        """The step ``exp(g · log(X̂^{-1} M X̂_{t-1}))`` that moves X̂ toward where the target's measured
-        motion M took the previous estimate; g = ``motion_gain`` times min(1, speed / ``motion_speed``),
+        """The step that moves X̂'s centre g of the way to where the target's measured motion M took the
+        previous estimate's (``motion_pull`` similarity: ``exp(g · log(X̂^{-1} M X̂_{t-1}))``, the whole state); g = ``motion_gain`` times min(1, speed / ``motion_speed``),
         the speed being how far M moves X̂_{t-1}'s centre, in object sizes (a slow target is left to the
         appearance: at the stop the measured motion is mostly the growth, and a lag accumulates), but at
         least min(1, offset / ``motion_offset``), the offset being X̂'s centre from the prediction's in
@@ -426,6 +430,10 @@ class AffineParticleFilter:
         gain = self.config.motion_gain * min(1.0, speed / self.config.motion_speed)
         offset = float(np.linalg.norm(predicted[:2, 2] - estimate[:2, 2])) / size
         gain = max(gain, min(1.0, offset / self.config.motion_offset))
+        if self.config.motion_pull == "translation":
+            moved = estimate.copy()
+            moved[:2, 2] += gain * (predicted[:2, 2] - estimate[:2, 2])
+            return ag.inverse(estimate) @ moved
         return ag.expm(gain * ag.logm(ag.inverse(estimate) @ predicted))
 
     def _finish(self, states: np.ndarray, scores: np.ndarray, patches: np.ndarray) -> FrameResult:

@@ -272,3 +272,23 @@ def test_target_motion_keeps_a_fast_approach_from_a_loose_box():
     with_motion = np.median([loose_box_auc(frames, quads, 0.6, s) for s in range(5)])
     assert without < 0.3
     assert with_motion > without + 0.25
+
+
+def worst_scale_error(motion_pull: str, seed: int) -> float:
+    """Largest |scale / true scale - 1| over a 30-frame track of the textured target (x1.5 growth)."""
+    from test_docking_filter import moving_target_scene
+
+    scene = list(moving_target_scene(30))
+    tracker = DockingTracker(DockingConfig(motion_pull=motion_pull, seed=seed))
+    tracker.start(scene[0][0], scene[0][1])
+    return max(abs(tracker.step(frame).params[2] / ag.to_params(truth)[2] - 1) for frame, truth in scene[1:])
+
+
+def test_the_motion_pulls_the_centre_and_leaves_the_scale_to_the_appearance():
+    """The default pull (translation) moves X̂'s centre only: pulling the whole similarity carried the
+    previous estimate's scale error forward, with nothing to bring it back (worst scale error over the
+    track, median of 5 tracker seeds, 0.12 against 0.05; on an AVX-512 BLAS one track ran off, was
+    declared lost and restarted elsewhere)."""
+    translation = np.median([worst_scale_error("translation", s) for s in range(5)])
+    similarity = np.median([worst_scale_error("similarity", s) for s in range(5)])
+    assert translation < 0.09 and translation < similarity - 0.03, (translation, similarity)
