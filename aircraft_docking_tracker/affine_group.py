@@ -30,6 +30,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .geometry import quad_to_box
+
 #: Lie algebra basis E1..E6 (seed eq. 5): scale, aspect, rotation, skew, x, y.
 BASIS = np.array([
     [[1, 0, 0], [0, 1, 0], [0, 0, 0]],
@@ -203,9 +205,7 @@ def from_quad(quad: np.ndarray) -> np.ndarray:
 
 def to_box(X: np.ndarray) -> np.ndarray:
     """Axis-aligned bounding box (..., 4) x, y, w, h of the state's quadrilateral."""
-    q = to_quad(X)
-    lo, hi = q.min(axis=-2), q.max(axis=-2)
-    return np.concatenate([lo, hi - lo], axis=-1)
+    return quad_to_box(to_quad(X))
 
 
 # --------------------------------------------------------------------------- warping

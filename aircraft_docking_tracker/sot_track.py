@@ -28,6 +28,7 @@ from tqdm import tqdm
 from .config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from .bag import check_outputs
 from .docking import DockingConfig, DockingTracker
+from .geometry import quad_to_box
 
 NODE_NAME = "docking_tracker"
 VIDEO_SUFFIXES = (".avi", ".mp4", ".mkv", ".mov", ".webm", ".mpg", ".mpeg")
@@ -65,8 +66,7 @@ class TrackRun:
 
     @property
     def boxes(self) -> np.ndarray:
-        lo, hi = self.quads.min(axis=1), self.quads.max(axis=1)
-        return np.concatenate([lo, hi - lo], axis=1)
+        return quad_to_box(self.quads)
 
 
 # --------------------------------------------------------------------------- inputs

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from aircraft_docking_tracker.evaluation.evaluate import evaluate_bags
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.geometry import box_iou
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
 from aircraft_docking_tracker.scenarios.make_scenario import write_docking_bag, write_uav_bag
 from aircraft_docking_tracker.scenarios.uav import STATE_HIDDEN, UavScene, UavSceneConfig

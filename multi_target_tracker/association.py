@@ -77,8 +77,8 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from aircraft_docking_tracker.config import param, validate
+from aircraft_docking_tracker.geometry import box_iou
 from multi_target_tracker.kalman import KalmanBank, KalmanConfig
-from multi_target_tracker.motchallenge import box_iou
 
 TENTATIVE, CONFIRMED, COASTING, LOST, PREDICTED = 0, 1, 2, 3, 4
 #: What each state means (the ``state`` field of the node's ``tracks`` table).

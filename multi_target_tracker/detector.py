@@ -46,6 +46,7 @@ import numpy as np
 from scipy.special import expit
 
 from aircraft_docking_tracker.config import ConfigError, param
+from aircraft_docking_tracker.geometry import box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
@@ -217,10 +218,7 @@ def map_back(boxes: np.ndarray, scores: np.ndarray, back: np.ndarray, frame_size
     the frame, clipped to it; windows whose centre falls outside the frame are dropped."""
     if back is None or not len(boxes):
         return boxes, scores
-    x, y, w, h = boxes.T
-    corners = np.stack([np.stack([x, y], 1), np.stack([x + w, y], 1), np.stack([x + w, y + h], 1),
-                        np.stack([x, y + h], 1)], 1)                      # (n, 4, 2)
-    mapped = corners @ back[:, :2].T + back[:, 2]
+    mapped = box_to_quad(boxes) @ back[:, :2].T + back[:, 2]         # the windows' corners in the frame
     lo, hi = mapped.min(axis=1), mapped.max(axis=1)
     centre = (lo + hi) / 2
     width, height = frame_size

@@ -18,6 +18,8 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
+from aircraft_docking_tracker.geometry import box_iou
+
 #: One MOTChallenge row. ``cls`` and ``visibility`` are -1 where the file does not give them.
 MOT_ROW_DTYPE = np.dtype([
     ("frame", np.int32), ("id", np.int32),
@@ -208,20 +210,6 @@ def write_results(path: str | Path, rows: np.ndarray) -> None:
         for r in rows:
             out.write(f"{r['frame']},{r['id']},{r['x']:.2f},{r['y']:.2f},{r['w']:.2f},{r['h']:.2f},"
                       f"{r['score']:.4g},-1,-1,-1\n")
-
-
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Intersection over union of boxes ``a[..., 4]`` and ``b[..., 4]`` (x, y, w, h), broadcast.
-
-    Boxes with zero area have IoU 0 with everything.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    iw = np.minimum(a[..., 0] + a[..., 2], b[..., 0] + b[..., 2]) - np.maximum(a[..., 0], b[..., 0])
-    ih = np.minimum(a[..., 1] + a[..., 3], b[..., 1] + b[..., 3]) - np.maximum(a[..., 1], b[..., 1])
-    inter = np.maximum(iw, 0.0) * np.maximum(ih, 0.0)
-    union = a[..., 2] * a[..., 3] + b[..., 2] * b[..., 3] - inter
-    return inter / np.where(union > 0, union, 1.0)       # no area: inter = 0, IoU 0
 
 
 def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:

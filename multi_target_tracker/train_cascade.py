@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.geometry import box_iou
 from multi_target_tracker.cascade import Cascade, CascadeTrainConfig, train_cascade
 from multi_target_tracker.detector import scan_cascade, window_scales
 from multi_target_tracker.features import FUSED_DIM, LBP_SIZE, FeatureConfig, LevelScan

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.geometry import box_iou
 from multi_target_tracker.cascade import Cascade, CascadeError, CascadeTrainConfig, Stage, train_cascade
 from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_windows, suppress_contained
 from multi_target_tracker.train_cascade import LabelledImage, NegativeMiner, photometric, positive_vectors, window_shaped

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.special import expit
 
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.geometry import box_iou
 from multi_target_tracker.detector import Detector, DetectorConfig, group_windows, suppress_contained
 from multi_target_tracker.train_cascade import read_yolo_folder
 

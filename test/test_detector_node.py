@@ -13,7 +13,7 @@ from visualization_msgs.msg import MarkerArray
 
 from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.geometry import box_iou
 from aircraft_docking_tracker.images import numpy_to_compressed, numpy_to_image
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table
 from aircraft_docking_tracker.processing import ProcessingStats, process_guarded

@@ -7,7 +7,7 @@ import numpy as np
 from aircraft_docking_tracker import affine_group as ag
 from aircraft_docking_tracker import sot_track
 from aircraft_docking_tracker.bag import BagWriter
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou
+from aircraft_docking_tracker.geometry import box_iou
 from aircraft_docking_tracker.images import numpy_to_image
 from aircraft_docking_tracker.scenarios.datasets import read_sot_boxes
 from aircraft_docking_tracker.scenarios.messages import header, quad_to_polygon

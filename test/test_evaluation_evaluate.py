@@ -9,7 +9,7 @@ import pytest
 
 from aircraft_docking_tracker.bag import BagWriter
 from aircraft_docking_tracker.evaluation import evaluate as ev
-from aircraft_docking_tracker.evaluation.sot_metrics import box_iou, box_to_quad
+from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE
 from aircraft_docking_tracker.scenarios import messages as m
 from aircraft_docking_tracker.scenarios.render import frame_stamp_ns

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from aircraft_docking_tracker import geometry
 from aircraft_docking_tracker.evaluation import detection_metrics as dm
 from aircraft_docking_tracker.evaluation import sot_metrics as sm
 from aircraft_docking_tracker.evaluation import speed
@@ -14,21 +15,21 @@ from aircraft_docking_tracker.evaluation import speed
 def test_box_iou_shifted_boxes():
     a = [[0, 0, 10, 10]] * 4
     b = [[5, 0, 10, 10], [5, 5, 10, 10], [20, 20, 5, 5], [0, 0, 10, 10]]
-    np.testing.assert_allclose(sm.box_iou(np.array(a), np.array(b)), [1 / 3, 1 / 7, 0.0, 1.0])
+    np.testing.assert_allclose(geometry.box_iou(np.array(a), np.array(b)), [1 / 3, 1 / 7, 0.0, 1.0])
 
 
 def test_box_iou_pairwise_matrix_and_degenerate():
     a = np.array([[0, 0, 10, 10], [0, 0, 0, 10]], float)
     b = np.array([[5, 0, 10, 10], [np.nan, 0, 1, 1]], float)
-    m = sm.box_iou(a[:, None], b[None])
+    m = geometry.box_iou(a[:, None], b[None])
     np.testing.assert_allclose(m, [[1 / 3, 0.0], [0.0, 0.0]])
 
 
 def test_polygon_iou_matches_box_iou_and_rotated_square():
     boxes_a = np.array([[0, 0, 10, 10], [3, 4, 8, 6]], float)
     boxes_b = np.array([[5, 0, 10, 10], [4, 5, 8, 6]], float)
-    np.testing.assert_allclose(sm.polygon_iou(sm.box_to_quad(boxes_a), sm.box_to_quad(boxes_b)),
-                               sm.box_iou(boxes_a, boxes_b), atol=1e-6)
+    np.testing.assert_allclose(sm.polygon_iou(geometry.box_to_quad(boxes_a), geometry.box_to_quad(boxes_b)),
+                               geometry.box_iou(boxes_a, boxes_b), atol=1e-6)
     square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float)
     r = math.sqrt(2)
     diamond = np.array([[0, -r], [r, 0], [0, r], [-r, 0]], float)
@@ -45,8 +46,8 @@ def test_center_errors_and_quads():
     pred = np.array([[3, 4, 10, 10], [np.nan] * 4])
     err = sm.center_errors(pred, gt)
     assert err[0] == pytest.approx(5.0) and np.isinf(err[1])
-    np.testing.assert_allclose(sm.center_errors(sm.box_to_quad(pred[:1]), sm.box_to_quad(gt[:1])), [5.0])
-    np.testing.assert_allclose(sm.quad_to_box(sm.box_to_quad(gt)), gt)
+    np.testing.assert_allclose(sm.center_errors(geometry.box_to_quad(pred[:1]), geometry.box_to_quad(gt[:1])), [5.0])
+    np.testing.assert_allclose(geometry.quad_to_box(geometry.box_to_quad(gt)), gt)
 
 
 def test_success_curve_and_auc_hand_computed():
@@ -87,7 +88,7 @@ def test_score_sequence_rejects_mismatched_lengths():
     with pytest.raises(sm.MetricInputError):
         sm.score_sequence(np.zeros((3, 4)), np.zeros((2, 4)))
     with pytest.raises(ValueError):
-        sm.box_iou(np.zeros((2, 3)), np.zeros((2, 3)))
+        geometry.box_iou(np.zeros((2, 3)), np.zeros((2, 3)))
 
 
 def test_greedy_matching_by_score():
@@ -138,3 +139,14 @@ def test_speed_helpers():
     ticks = iter([0.0, 0.5, 1.0, 3.0])
     results, lat = speed.time_calls(lambda x: 2 * x, [1, 2], clock=lambda: next(ticks))
     assert results == [2, 4] and lat.tolist() == [0.5, 2.0]
+
+
+def test_geometry_boxes_and_quadrilaterals_broadcast_and_refuse_wrong_shapes():
+    quads = geometry.box_to_quad(np.array([[0, 0, 4, 2], [1, 1, 2, 2]], float))
+    stacked = np.stack([quads, quads + 1])                                 # (2, 2, 4, 2)
+    assert geometry.quad_to_box(stacked).shape == (2, 2, 4)
+    np.testing.assert_allclose(geometry.quad_to_box(stacked)[1, 0], [1, 1, 4, 2])
+    with pytest.raises(ValueError):
+        geometry.box_to_quad(np.zeros((2, 8)))
+    with pytest.raises(ValueError):
+        geometry.quad_to_box(np.zeros((3, 2)))

@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aircraft_docking_tracker.config import param
-from aircraft_docking_tracker.evaluation.sot_metrics import MetricInputError, as_boxes, box_iou
+from aircraft_docking_tracker.evaluation.sot_metrics import MetricInputError, as_boxes
+from aircraft_docking_tracker.geometry import box_iou
 
 
 @dataclass

@@ -42,7 +42,8 @@ from aircraft_docking_tracker.config import add_config_arguments, config_from_ar
 from aircraft_docking_tracker.evaluation import plots, report
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, DetectionMetricsConfig
 from aircraft_docking_tracker.evaluation.mot_metrics import MotEvaluator
-from aircraft_docking_tracker.evaluation.sot_metrics import SotMetricsConfig, box_iou, box_to_quad, score_sequence
+from aircraft_docking_tracker.evaluation.sot_metrics import SotMetricsConfig, score_sequence
+from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from aircraft_docking_tracker.evaluation.speed import latency_percentiles, stream_fps
 from aircraft_docking_tracker.images import to_bgr8
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table

@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from aircraft_docking_tracker.config import param
+from aircraft_docking_tracker.geometry import box_iou
 
 SUCCESS_THRESHOLDS = np.round(np.arange(0.0, 1.0 + 1e-9, 0.05), 2)   # OTB: 0:0.05:1
 PRECISION_THRESHOLDS = np.arange(0.0, 51.0)                           # OTB: 0:50 px
@@ -65,21 +66,6 @@ def as_quads(quads) -> np.ndarray:
     return arr
 
 
-def box_to_quad(boxes) -> np.ndarray:
-    """Axis-aligned boxes -> quadrilaterals TL, TR, BR, BL, shape ``(N, 4, 2)``."""
-    b = as_boxes(boxes)
-    x0, y0, x1, y1 = b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]
-    return np.stack([np.stack([x0, y0], -1), np.stack([x1, y0], -1),
-                     np.stack([x1, y1], -1), np.stack([x0, y1], -1)], axis=1)
-
-
-def quad_to_box(quads) -> np.ndarray:
-    """The axis-aligned bounding box ``x, y, w, h`` of each quadrilateral, shape ``(N, 4)``."""
-    q = as_quads(quads)
-    lo, hi = q.min(axis=1), q.max(axis=1)
-    return np.concatenate([lo, hi - lo], axis=1)
-
-
 def centers(regions) -> np.ndarray:
     """Centres ``(N, 2)`` of boxes ``(N, 4)`` or quadrilaterals ``(N, 4, 2)`` (mean of the corners)."""
     arr = np.asarray(regions, dtype=np.float64)
@@ -87,27 +73,6 @@ def centers(regions) -> np.ndarray:
         return as_quads(arr).mean(axis=1)
     b = as_boxes(arr)
     return b[:, :2] + b[:, 2:] / 2.0
-
-
-def box_iou(a, b) -> np.ndarray:
-    """IoU of boxes ``(..., 4)`` with boxes ``(..., 4)``, broadcasting the leading axes.
-
-    ``box_iou(a, b)`` for two equal-length lists is per frame; ``box_iou(a[:, None], b[None])`` is
-    the pairwise matrix. Boxes with w or h <= 0 have IoU 0; NaN boxes give IoU 0.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    if a.shape[-1] != 4 or b.shape[-1] != 4:
-        raise MetricInputError(f"boxes must end in x, y, w, h (got shapes {a.shape}, {b.shape})")
-    ix = np.minimum(a[..., 0] + a[..., 2], b[..., 0] + b[..., 2]) - np.maximum(a[..., 0], b[..., 0])
-    iy = np.minimum(a[..., 1] + a[..., 3], b[..., 1] + b[..., 3]) - np.maximum(a[..., 1], b[..., 1])
-    inter = np.clip(ix, 0.0, None) * np.clip(iy, 0.0, None)
-    area_a = np.clip(a[..., 2], 0.0, None) * np.clip(a[..., 3], 0.0, None)
-    area_b = np.clip(b[..., 2], 0.0, None) * np.clip(b[..., 3], 0.0, None)
-    union = area_a + area_b - inter
-    with np.errstate(invalid="ignore", divide="ignore"):
-        iou = np.where(union > 0, inter / union, 0.0)
-    return np.nan_to_num(iou, nan=0.0)
 
 
 def polygon_iou(p, q) -> np.ndarray:

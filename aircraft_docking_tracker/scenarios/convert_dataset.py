@@ -25,7 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 from aircraft_docking_tracker.bag import BagWriter
-from aircraft_docking_tracker.evaluation.sot_metrics import box_to_quad
+from aircraft_docking_tracker.geometry import box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from aircraft_docking_tracker.scenarios import datasets
 from aircraft_docking_tracker.scenarios import messages as m

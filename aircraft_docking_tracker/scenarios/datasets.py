@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aircraft_docking_tracker.evaluation.sot_metrics import box_to_quad
+from aircraft_docking_tracker.geometry import box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
