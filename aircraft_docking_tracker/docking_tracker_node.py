@@ -6,8 +6,9 @@ Topics (relative names):
 * in ``image`` (``sensor_msgs/Image``, any encoding; ``CompressedImage`` with ``node.compressed``),
   sensor-data QoS, newest frame kept, skipped frames counted; tracked in grey;
 * in ``detections`` (``PointCloud2``, ``DETECTION_DTYPE``): while waiting or lost, the best row of
-  class ``detection_class`` (re)starts the track; used when its stamp is within
-  ``node.detection_max_age`` of the image's;
+  class ``detection_class`` (re)starts the track; while tracking, rows that keep finding the aircraft
+  away from the track restart it there (``override_after``); each table is used once, with the next
+  image, when its stamp is within ``node.detection_max_age`` of the image's;
 * in ``docking/init`` (``geometry_msgs/PolygonStamped``): a one-shot start: 4 points (TL, TR, BR,
   BL quadrilateral) or 2 points (box corners TL, BR); an empty polygon stops the track (waiting);
 * out ``docking/polygon`` (``PolygonStamped``): the tracked quadrilateral, 4 points in pixels, TL,
@@ -158,11 +159,14 @@ class DockingProcessor(MessageProcessor):
         return out
 
     def _fresh_detections(self, stamp_ns: int) -> np.ndarray | None:
+        """The newest detection table, once (a table is one frame's evidence for the override count),
+        if its stamp is within ``detection_max_age`` of the image's."""
         if self._detections is None:
             return None
         det_stamp, table = self._detections
         if abs(det_stamp - stamp_ns) > self.node.detection_max_age * 1e9:
             return None
+        self._detections = None
         return table
 
     def configure(self, config: DockingConfig) -> None:

@@ -151,15 +151,19 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
 
 # --------------------------------------------------------------------------- the run
 def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int | None = None,
-          progress: bool = True, desc: str = "sot_track") -> TrackRun:
-    """Run the docking tracker over grey ``frames`` from ``init`` (box, quadrilateral or state).
+          progress: bool = True, desc: str = "sot_track", detections: Iterable | None = None) -> TrackRun:
+    """Run the docking tracker over grey ``frames`` from ``init`` (box, quadrilateral or state; None:
+    wait for a detection).
 
     The first frame starts the filter; each later frame is one ``DockingTracker.step`` (timed
-    alone: reading and decoding the frames are not in ``step_seconds``). A frame that cannot be
-    read or decoded (a ``ValueError`` from ``frames``) ends the run: what came before it is kept
-    and ``TrackRun.stopped`` says which frame and why.
+    alone: reading and decoding the frames are not in ``step_seconds``), given the frame's detection
+    table from ``detections`` if any (re-acquisition and the override rule, as the node does). A
+    frame that cannot be read or decoded (a ``ValueError`` from ``frames``) ends the run: what came
+    before it is kept and ``TrackRun.stopped`` says which frame and why. Frames without a track
+    (waiting) have NaN quadrilaterals.
     """
     tracker = DockingTracker(config)
+    tables = iter(detections) if detections is not None else None
     quads, states, scores, particles, seconds = [], [], [], [], []
     stopped = None
     iterator = iter(frames)
@@ -174,10 +178,11 @@ def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int 
             stopped = f"frame {index} cannot be read: {exc}"
             break
         bar.update(1)
+        table = next(tables, None) if tables is not None else None
         t0 = time.perf_counter()
-        result = tracker.start(frame, init) if index == 0 else tracker.step(frame)
+        result = tracker.start(frame, init) if index == 0 and init is not None else tracker.step(frame, table)
         seconds.append(time.perf_counter() - t0)
-        quads.append(result.quad)
+        quads.append(result.quad if result.quad is not None else np.full((4, 2), np.nan))
         states.append(result.state)
         scores.append(result.score)
         particles.append(result.particles)

@@ -153,7 +153,7 @@ def docking_sequences(tmp: Path, count: int, frames: int, seed0: int = REPORT_SE
 # Trackers
 # ================================================================================================
 SEED_PRESET = dict(chart="unit", ar_dims="all", estimate="best", update_rule="background", anchor_weight=0.0,
-                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0, motion_gain=0.0)
+                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0, motion_gain=0.0, override_after=0)
 ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 undone, or an option tried)
     "ISPF, seed's choices (docking_tracker_seed.yaml)": SEED_PRESET,
     "ISPF, argmax estimate": {"estimate": "best"},
@@ -168,6 +168,8 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, extent turned to the silhouette's axis": {"extent_rotation": 0.05},
     "ISPF, per-pixel flicker threshold": {"flicker_gain": 2.0},
     "ISPF, aspect pull 0.03": {"aspect_pull": 0.03},
+    "ISPF, no detector override": {"override_after": 0},
+    "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
 }
 _DETECTOR = None
 
@@ -182,36 +184,36 @@ def detector():
     return _DETECTOR
 
 
+def stand_detections(seq: dict) -> list:
+    """The stand camera cascade's detection table of every frame of a synthetic approach (computed once
+    per sequence: the detector is deterministic, every tracker and seed sees the same rows)."""
+    if "detections" not in seq:
+        seq["detections"] = [detector().detect(cv2.imread(f, cv2.IMREAD_GRAYSCALE)) for f in seq["files"]]
+    return seq["detections"]
+
+
 def run_ours(seq: dict, overrides: dict, seed: int = 0, start: str = "box") -> dict:
     """Our tracker from ``start``: box (the ground truth's first box), polygon (the first polygon) or
-    detector (wait for the stand camera cascade's aircraft row, as the node does; NaN before)."""
+    detector (wait for the stand camera cascade's aircraft row, as the node does; NaN before). On the
+    synthetic stand scenes it runs as the stand does (config/stand_camera.yaml's rules, the cascade's
+    rows every frame: re-acquisition while lost, the override rule); real sequences have no detector."""
     from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir  # noqa: PLC0415
-    from aircraft_docking_tracker.docking import DockingConfig, DockingTracker  # noqa: PLC0415
+    from aircraft_docking_tracker.docking import DockingConfig  # noqa: PLC0415
     from aircraft_docking_tracker.sot_track import track  # noqa: PLC0415
 
     frames = (cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in seq["files"])
-    if start != "detector":
-        config = DockingConfig(**{**overrides, "seed": seed})
-        init = seq["gt_quads"][0] if start == "polygon" else seq["gt_boxes"][0]
-        run = track(frames, init, config, len(seq["files"]), progress=False)
-        return {"boxes": run.boxes, "quads": run.quads, "times": run.step_seconds, "particles": run.particles}
-    stand = load_yaml_parameters(package_config_dir() / "stand_camera.yaml", "docking_tracker")
-    tracker = DockingTracker(DockingConfig(**{**stand, **overrides, "seed": seed}))
-    det = detector()
-    quads, times, particles, started_at = [], [], [], None
-    for index, frame in enumerate(frames):
-        table = det.detect(frame) if started_at is None else None
-        t0 = time.perf_counter()
-        r = tracker.step(frame, table)
-        times.append(time.perf_counter() - t0)
-        if r.started and started_at is None:
-            started_at = index
-        quads.append(r.quad if r.quad is not None else np.full((4, 2), np.nan))
-        particles.append(r.particles)
-    quads = np.array(quads)
-    lo, hi = quads.min(axis=1), quads.max(axis=1)
-    return {"boxes": np.concatenate([lo, hi - lo], axis=1), "quads": quads, "times": np.array(times),
-            "particles": np.array(particles), "started_at": started_at}
+    stand, tables = {}, None
+    if seq["kind"] != "real":
+        stand = load_yaml_parameters(package_config_dir() / "stand_camera.yaml", "docking_tracker")
+        tables = stand_detections(seq)
+    config = DockingConfig(**{**stand, **overrides, "seed": seed})
+    init = {"polygon": seq["gt_quads"][0], "box": seq["gt_boxes"][0], "detector": None}[start]
+    run = track(frames, init, config, len(seq["files"]), progress=False, detections=tables)
+    out = {"boxes": run.boxes, "quads": run.quads, "times": run.step_seconds, "particles": run.particles}
+    if start == "detector":
+        waiting = np.isnan(run.quads).any(axis=(1, 2))
+        out["started_at"] = int(np.argmin(waiting)) if not waiting.all() else None
+    return out
 
 
 def run_peer(seq: dict, name: str, tmp: Path) -> dict | None:
@@ -267,8 +269,7 @@ def reacquisition(seq: dict, seed: int, blackout: tuple[int, int]) -> dict:
         if index == 0:
             r = tracker.start(frame, seq["gt_boxes"][0])
             continue
-        table = det.detect(frame) if tracker.state != TRACKING else None
-        r = tracker.step(frame, table)
+        r = tracker.step(frame, det.detect(frame))   # the node gets the cascade's rows every frame
         states.append(r.state)
         if r.state == LOST and lost_at is None and index >= blackout[0]:
             lost_at = index
@@ -400,15 +401,14 @@ def run_candidates(n_scenes: int, seeds: int, frames: int) -> None:
 def score(seq: dict, out: dict) -> dict:
     from aircraft_docking_tracker import affine_group as ag  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.sot_metrics import polygon_iou, score_sequence  # noqa: PLC0415
+    from aircraft_docking_tracker.geometry import box_to_quad  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.speed import fps  # noqa: PLC0415
 
     synthetic = seq["gt_quads"] is not None
     if synthetic:          # polygon IoU; OpenCV's boxes as their quadrilaterals
         pred = out.get("quads")
         if pred is None:
-            x, y, w, h = np.asarray(out["boxes"], dtype=float).T
-            pred = np.stack([np.stack([x, y], 1), np.stack([x + w, y], 1), np.stack([x + w, y + h], 1),
-                             np.stack([x, y + h], 1)], axis=1)
+            pred = box_to_quad(out["boxes"])
         s = score_sequence(pred, seq["gt_quads"])
     else:
         s = score_sequence(out["boxes"], seq["gt_boxes"])

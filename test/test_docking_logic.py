@@ -28,7 +28,7 @@ def test_best_detection_picks_the_highest_scoring_row_of_the_class():
 
 def test_waits_then_starts_from_a_detection_of_the_aircraft_class():
     scene = list(moving_target_scene(30))
-    tracker = DockingTracker(DockingConfig(detection_class=2, seed=0))
+    tracker = DockingTracker(DockingConfig(detection_class=2, seed=0, override_after=0))
     r = tracker.step(scene[0][0])
     assert r.state == WAITING and r.quad is None and np.isnan(r.params).all()
     truth_box = ag.to_box(scene[1][1])
@@ -82,6 +82,35 @@ def test_a_lost_track_recovers_after_enough_good_frames():
     tracker.filter.step = lambda f: FrameResult(truth, next(scores), 20, False, truth[None])
     states = [tracker.step(frame).state for _ in range(8)]
     assert states == [TRACKING, TRACKING, TRACKING, LOST, LOST, LOST, TRACKING, TRACKING]
+
+
+def test_the_detector_overrides_a_track_it_keeps_seeing_the_aircraft_away_from():
+    """The override rule: a track started on the wrong place (a stand structure hiding the aircraft)
+    restarts on the aircraft detection once the detector has seen it away from the track, at the same
+    place, override_after times; rows on the track reset the count, frames without rows do not, rows that
+    jump about never add up, and override_after 0 ignores detections while tracking."""
+    scene = list(moving_target_scene(40))[:12]              # 3.5 px a frame
+    wrong = ag.from_box(250, 180, 48, 32)                    # bottom right; the target starts top left
+
+    def run(rows_of, **cfg):
+        tracker = DockingTracker(DockingConfig(**{"override_after": 3, "seed": 0, **cfg}))
+        tracker.start(scene[0][0], wrong)
+        return [tracker.step(frame, rows_of(i, truth)) for i, (frame, truth) in enumerate(scene[1:], 1)]
+
+    at_truth = lambda i, truth: detections((*ag.to_box(truth), 0.9, 1))
+    results = run(at_truth)
+    restarts = [i for i, r in enumerate(results, 1) if r.started]
+    assert restarts == [3], restarts                         # 3 frames away, then the restart at once
+    assert np.linalg.norm(results[-1].params[:2] - ag.to_params(scene[-1][1])[:2]) < 10
+
+    gappy = lambda i, truth: at_truth(i, truth) if i % 2 else None   # misses every other frame
+    assert [i for i, r in enumerate(run(gappy), 1) if r.started] == [5]
+    on_track = lambda i, truth: detections((*ag.to_box(truth), 0.9, 1), (250, 180, 48, 32, 0.5, 1))
+    assert not any(r.started for r in run(on_track))        # a row on the track: the detector agrees
+    jumping = lambda i, truth: detections((20 + 60 * (i % 3), 20, 40, 30, 0.9, 1))
+    assert not any(r.started for r in run(jumping))         # never twice at the same place
+    assert not any(r.started for r in run(at_truth, override_after=0))
+    assert not any(r.started for r in run(at_truth, detection_class=2))  # another class's rows
 
 
 def test_state_row():

@@ -129,10 +129,11 @@ def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
     reliable = {f"qos_overrides./{CAM}/image.subscription.reliability": "reliable"}
     hosts.start(hosts.compute, "detector_node", "detector.log", namespace=CAM, parameters=reliable)
     hosts.start(hosts.compute, "association_node", "association.log", namespace=CAM)
-    # never declared lost: a lost track restarts on the live detector's rows, which the offline run over
-    # the images alone cannot see (with the target motion on, this scene's track scores 0.69-0.75 while
-    # its IoU stays 0.62-0.65: below lost_score 0.75 for more than lost_after frames)
-    hosts.docking_tracker(box, parameters={**reliable, "lost_after": NEVER_LOST})
+    # the live detector's rows never restart the track (never declared lost, no override): the offline run
+    # over the images alone cannot see them (with the target motion on, this scene's track scores 0.69-0.75
+    # while its IoU stays 0.62-0.65: below lost_score 0.75 for more than lost_after frames)
+    alone = {"lost_after": NEVER_LOST, "override_after": 0}
+    hosts.docking_tracker(box, parameters={**reliable, **alone})
     hosts.wait_recording("detections", "tracks", "docking/polygon")
     player = hosts.play(bag, 0.2)  # 14 Hz bag: a frame every 0.36 s
     assert player.wait(180) == 0, hosts.log("play.log")
@@ -163,7 +164,7 @@ def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
         return _messages(tmp_path / f"{nodes[0]}_offline.mcap", f"/{out_topic}")
 
     offline_quads = offline_outputs("docking/polygon", ["docking_tracker"], "docking/polygon", initial_box=box,
-                                    lost_after=NEVER_LOST)
+                                    **alone)
     live_quads = _messages(recording, f"/{CAM}/docking/polygon")
     assert len(live_quads) == len(offline_quads)
     for (_, a), (_, b) in zip(live_quads, offline_quads):
