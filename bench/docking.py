@@ -207,7 +207,7 @@ def run_ours(seq: dict, overrides: dict, seed: int = 0, start: str = "box") -> d
         stand = load_yaml_parameters(package_config_dir() / "stand_camera.yaml", "docking_tracker")
         tables = stand_detections(seq)
     config = DockingConfig(**{**stand, **overrides, "seed": seed})
-    init = {"polygon": seq["gt_quads"][0], "box": seq["gt_boxes"][0], "detector": None}[start]
+    init = seq["gt_quads"][0] if start == "polygon" else seq["gt_boxes"][0] if start == "box" else None
     run = track(frames, init, config, len(seq["files"]), progress=False, detections=tables)
     out = {"boxes": run.boxes, "quads": run.quads, "times": run.step_seconds, "particles": run.particles}
     if start == "detector":
