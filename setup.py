@@ -7,10 +7,10 @@ PACKAGE = "aircraft_docking_tracker"
 
 # Executables installed into lib/aircraft_docking_tracker, where `ros2 run` looks.
 CONSOLE_SCRIPTS = {
-    # nodes
-    "detector_node": "multi_target_tracker.detector_node:main",
-    "association_node": "multi_target_tracker.association_node:main",
-    "docking_tracker_node": "aircraft_docking_tracker.docking_tracker_node:main",
+    # nodes (one compute thread per library by default: executables.py)
+    "detector_node": "aircraft_docking_tracker.executables:detector_node",
+    "association_node": "aircraft_docking_tracker.executables:association_node",
+    "docking_tracker_node": "aircraft_docking_tracker.executables:docking_tracker_node",
     # MCAP recording and replay
     "mcap_record": "aircraft_docking_tracker.mcap_record:main",
     "mcap_play": "aircraft_docking_tracker.mcap_play:main",

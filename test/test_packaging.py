@@ -19,6 +19,29 @@ def test_every_console_script_has_a_main(name, target):
     assert callable(getattr(importlib.import_module(module), func)), name
 
 
+def test_the_node_executables_default_each_compute_library_to_one_thread(monkeypatch):
+    """The nodes' entry points set the thread defaults before numpy / OpenCV load (importing the entry
+    module loads neither), and leave a variable the user set alone."""
+    import subprocess  # noqa: PLC0415
+    import sys  # noqa: PLC0415
+
+    from aircraft_docking_tracker import executables  # noqa: PLC0415
+
+    for name in ("detector_node", "association_node", "docking_tracker_node"):
+        assert console_scripts()[name] == f"aircraft_docking_tracker.executables:{name}"
+    probe = "import sys, aircraft_docking_tracker.executables; print(sorted({'numpy', 'cv2', 'scipy'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=REPO)
+    assert out.stdout.strip() == "[]", out
+    for name in executables.THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    executables.one_thread_per_library()
+    import os  # noqa: PLC0415
+
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OPENCV_FOR_THREADS_NUM"] == "1"
+    assert os.environ["OMP_NUM_THREADS"] == "3"
+
+
 def test_package_xml_declares_every_ros_package_the_code_imports():
     declared = {e.text for e in ET.parse(REPO / "package.xml").getroot().iter("exec_depend")}
     used = set()
