@@ -25,8 +25,10 @@ sys.path.insert(0, str(REPO))
 from aircraft_docking_tracker.scenarios.uav import UAV_SETUP_GROUND_RESOLUTION  # noqa: E402
 CAMERAS = {
     # namespace: (scenario kind, seed, scenario options, nodes, set-up file, topics to play, rate factor)
-    # stand: seed 3 (the docking tracker learns nothing offline; the docking cascade, which saw this
-    # scene in training, only re-acquires a lost aircraft); UAV: seed 106, held out from its cascade
+    # stand: seed 3 (the docking tracker learns nothing offline; the docking cascade saw this scene in
+    # training and gives the start box, re-acquires a lost aircraft and may override a track: the live
+    # track scores what the offline core does from the ground truth's loose box, 0.71); UAV: seed 106,
+    # held out from its cascade
     "stand": ("docking", 3, {"frames": 210, "fps": 14.0, "width": 640, "height": 480},
               ["detector_node", "docking_tracker_node"], "stand_camera.yaml",
               ["image", "ground_truth/polygon", "ground_truth/nose", "ground_truth/stand"], 1.0),
