@@ -8,8 +8,8 @@ PACKAGE = "aircraft_docking_tracker"
 # Executables installed into lib/aircraft_docking_tracker, where `ros2 run` looks.
 CONSOLE_SCRIPTS = {
     # nodes (one compute thread per library by default: executables.py)
-    "detector_node": "aircraft_docking_tracker.executables:detector_node",
-    "association_node": "aircraft_docking_tracker.executables:association_node",
+    "detector_node": "multi_target_tracker.executables:detector_node",
+    "association_node": "multi_target_tracker.executables:association_node",
     "docking_tracker_node": "aircraft_docking_tracker.executables:docking_tracker_node",
     # MCAP recording and replay
     "mcap_record": "aircraft_docking_tracker.mcap_record:main",

@@ -1,4 +1,5 @@
-"""Entry points of the node executables (``ros2 run aircraft_docking_tracker <node>``).
+"""Entry point of ``docking_tracker_node`` and the thread defaults of every node executable
+(``multi_target_tracker/executables.py`` has the detector's and the association's).
 
 Before numpy, SciPy and OpenCV load, each compute library is given one thread unless the
 environment already says how many (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``,
@@ -18,20 +19,6 @@ def one_thread_per_library() -> None:
     """Default every compute library to one thread (a variable already set is left as it is)."""
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, "1")
-
-
-def detector_node(args=None):
-    one_thread_per_library()
-    from multi_target_tracker.detector_node import main  # noqa: PLC0415 - after the thread defaults
-
-    return main(args)
-
-
-def association_node(args=None):
-    one_thread_per_library()
-    from multi_target_tracker.association_node import main  # noqa: PLC0415
-
-    return main(args)
 
 
 def docking_tracker_node(args=None):

@@ -27,9 +27,11 @@ def test_the_node_executables_default_each_compute_library_to_one_thread(monkeyp
 
     from aircraft_docking_tracker import executables  # noqa: PLC0415
 
-    for name in ("detector_node", "association_node", "docking_tracker_node"):
-        assert console_scripts()[name] == f"aircraft_docking_tracker.executables:{name}"
-    probe = "import sys, aircraft_docking_tracker.executables; print(sorted({'numpy', 'cv2', 'scipy'} & set(sys.modules)))"
+    for name, package in (("detector_node", "multi_target_tracker"), ("association_node", "multi_target_tracker"),
+                          ("docking_tracker_node", "aircraft_docking_tracker")):
+        assert console_scripts()[name] == f"{package}.executables:{name}"
+    probe = ("import sys, aircraft_docking_tracker.executables, multi_target_tracker.executables; "
+             "print(sorted({'numpy', 'cv2', 'scipy'} & set(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=REPO)
     assert out.stdout.strip() == "[]", out
     for name in executables.THREAD_VARIABLES:
