@@ -457,9 +457,10 @@ class AffineParticleFilter:
         to the silhouette's principal axes around X̂ (static_background.foreground_extent). Its aspect is
         the ratio of the silhouette's standard deviations along them (that of a filled rectangle; unlike the
         bounding rectangle in X̂'s frame it does not depend on X̂'s own rotation and aspect); the template's
-        u axis is whichever axis is nearer X̂'s. Not measured: no trusted foreground, an implausible
-        silhouette (as the extent's), or a still target (no moving corners while the motion is measured):
-        the running background absorbs a standing aircraft and its silhouette falls apart."""
+        u axis is whichever axis is nearer X̂'s. Measured only on frames whose extent correction the
+        appearance accepted (on TinyTLP CarChase2 the other frames' silhouettes, 1.9:1 and 20 deg against
+        a 1.4:1 level box, took the AUC from 0.90 to 0.85), never on a still target (no moving corners
+        while the motion is measured): the running background absorbs a standing aircraft."""
         foreground = self.background.foreground
         if foreground is None:
             return
@@ -521,16 +522,18 @@ class AffineParticleFilter:
                 moved_score, moved_patch = self._score(estimate[None])
                 score, patch = float(moved_score[0]), moved_patch[0]
         correction = self._extent_correction(estimate) if self.config.extent_gain > 0 else None
+        accepted = False
         if correction is not None:          # kept unless it costs the appearance more than extent_max_drop
             moved = estimate @ correction
             moved_score, moved_patch = self._score(moved[None])
             if float(moved_score[0]) >= score - self.config.extent_max_drop:
                 self.extent_counts["measured"] += 1
+                accepted = True
                 estimate, score, patch = moved, float(moved_score[0]), moved_patch[0]
                 states = states @ correction
             else:
                 self.extent_counts["refused"] += 1
-        if self.config.shape_prior == "silhouette" and self._static_camera:
+        if self.config.shape_prior == "silhouette" and accepted:
             self._measure_shape(estimate)
         self.background_stats.add(self._score(estimate @ ag.exp_coords(self._ring))[0])
         rule = self.config.update_rule
