@@ -295,7 +295,9 @@ def test_the_motion_pulls_the_centre_and_leaves_the_scale_to_the_appearance():
     silhouette's shape prior (the default since) also holds the similarity pull's scale (0.08 against 0.05)."""
     translation = np.median([worst_scale_error("translation", s, **SESSION6_SHAPE) for s in range(5)])
     similarity = np.median([worst_scale_error("similarity", s, **SESSION6_SHAPE) for s in range(5)])
-    assert translation < 0.09 and translation < similarity - 0.03, (translation, similarity)
+    # medians measured (translation, similarity): Haswell 0.050 / 0.120, SkylakeX 0.047 / 0.120, Prescott
+    # 0.052 / 0.076 (the same on the commit before the shape prior: the old margin 0.03 failed there)
+    assert translation < 0.09 and translation < similarity - 0.015, (translation, similarity)
     defaults = np.median([worst_scale_error("translation", s) for s in range(5)])
     assert defaults < 0.09, defaults
 
