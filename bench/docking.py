@@ -168,6 +168,10 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, extent turned to the silhouette's axis": {"extent_rotation": 0.05},
     "ISPF, per-pixel flicker threshold": {"flicker_gain": 2.0},
     "ISPF, aspect pull 0.03": {"aspect_pull": 0.03},
+    "ISPF, session-6 shape (aspect to the start box's, no rotation pull, extent on a still target)":
+        {"shape_prior": "start", "rotation_pull": 0.0, "extent_still": "measure"},
+    "ISPF, aspect pulled to the start box's (shape_prior start)": {"shape_prior": "start", "rotation_pull": 0.0},
+    "ISPF, extent also on a still target": {"extent_still": "measure"},
     "ISPF, no detector override": {"override_after": 0},
     "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
 }

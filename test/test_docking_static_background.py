@@ -108,6 +108,17 @@ def test_extent_is_not_measured_when_the_silhouette_runs_off_the_search_region_o
     assert foreground_extent(fg, ag.from_box(100, 100, 80, 40), 1.0) is None
 
 
+def scene_frames(config, seed):
+    """A docking scene's grey frames and true quadrilaterals (N, 4, 2) (a DockingFrame carries float masks)."""
+    import cv2  # noqa: PLC0415
+
+    frames, quads = [], []
+    for f in DockingScene(config, seed=seed).frames():
+        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
+        quads.append(f.quad)
+    return frames, np.array(quads)
+
+
 def stop_scale_ratio(frames, quads, extent_gain, seed):
     # the extent's own effect: the target motion (motion_gain, on by default) off in both arms; with it on,
     # this scene's estimate stays tilted ~10 deg after the turn and the extent's rectangle at the stop
@@ -122,14 +133,9 @@ def stop_scale_ratio(frames, quads, extent_gain, seed):
 def test_extent_correction_keeps_the_scale_up_with_a_growing_aircraft():
     """A 4x approach from the first polygon: without the foreground the estimate lags (about 0.75 of
     the true scale at the stop on this scene), with it the lag is mostly gone. Medians over 3 seeds."""
-    import cv2  # noqa: PLC0415
-
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
-    frames, quads = [], []                 # grey frames and quads only (a DockingFrame carries float masks)
-    for f in DockingScene(config, seed=100).frames():
-        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
-        quads.append(f.quad)
+    frames, quads = scene_frames(config, 100)
     without = np.median([stop_scale_ratio(frames, quads, 0.0, s) for s in range(3)])
     with_fg = np.median([stop_scale_ratio(frames, quads, 0.3, s) for s in range(3)])
     assert with_fg > without + 0.1
@@ -259,27 +265,24 @@ def test_target_motion_keeps_a_fast_approach_from_a_loose_box():
     of its width, a frame at the start) from the first polygon's axis-aligned box, half of it background:
     without the motion the track stays on the start's background (AUC about 0.1), with it the track
     follows the aircraft. Medians over 5 tracker seeds."""
-    import cv2  # noqa: PLC0415
-
     config = DockingSceneConfig(width=640, height=480, frames=60, weather="rain", occluder="vehicle",
                                 growth=5.24, turn_deg=39.6, difficulty=1)
-    frames, quads = [], []
-    for f in DockingScene(config, seed=152).frames():
-        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
-        quads.append(f.quad)
-    quads = np.array(quads)
+    frames, quads = scene_frames(config, 152)
     without = np.median([loose_box_auc(frames, quads, 0.0, s) for s in range(5)])
     with_motion = np.median([loose_box_auc(frames, quads, 0.6, s) for s in range(5)])
     assert without < 0.3
     assert with_motion > without + 0.25
 
 
-def worst_scale_error(motion_pull: str, seed: int) -> float:
+SESSION6_SHAPE = {"shape_prior": "start", "rotation_pull": 0.0, "extent_still": "measure"}
+
+
+def worst_scale_error(motion_pull: str, seed: int, **overrides) -> float:
     """Largest |scale / true scale - 1| over a 30-frame track of the textured target (x1.5 growth)."""
     from test_docking_filter import moving_target_scene
 
     scene = list(moving_target_scene(30))
-    tracker = DockingTracker(DockingConfig(motion_pull=motion_pull, seed=seed))
+    tracker = DockingTracker(DockingConfig(motion_pull=motion_pull, seed=seed, **overrides))
     tracker.start(scene[0][0], scene[0][1])
     return max(abs(tracker.step(frame).params[2] / ag.to_params(truth)[2] - 1) for frame, truth in scene[1:])
 
@@ -288,7 +291,35 @@ def test_the_motion_pulls_the_centre_and_leaves_the_scale_to_the_appearance():
     """The default pull (translation) moves X̂'s centre only: pulling the whole similarity carried the
     previous estimate's scale error forward, with nothing to bring it back (worst scale error over the
     track, median of 5 tracker seeds, 0.12 against 0.05; on an AVX-512 BLAS one track ran off, was
-    declared lost and restarted elsewhere)."""
-    translation = np.median([worst_scale_error("translation", s) for s in range(5)])
-    similarity = np.median([worst_scale_error("similarity", s) for s in range(5)])
-    assert translation < 0.09 and translation < similarity - 0.03, (translation, similarity)
+    declared lost and restarted elsewhere). Compared with session 6's shape rules in both arms: the
+    silhouette's shape prior (the default since) also holds the similarity pull's scale (0.08 against 0.05)."""
+    translation = np.median([worst_scale_error("translation", s, **SESSION6_SHAPE) for s in range(5)])
+    similarity = np.median([worst_scale_error("similarity", s, **SESSION6_SHAPE) for s in range(5)])
+    # medians measured (translation, similarity): Haswell 0.050 / 0.120, SkylakeX 0.047 / 0.120, Prescott
+    # 0.052 / 0.076 (the same on the commit before the shape prior: the old margin 0.03 failed there)
+    assert translation < 0.09 and translation < similarity - 0.015, (translation, similarity)
+    defaults = np.median([worst_scale_error("translation", s) for s in range(5)])
+    assert defaults < 0.09, defaults
+
+
+def stop_aspect_error(frames, quads, shape_prior, seed):
+    """|aspect / true aspect - 1| at the last frame, tracked from the first polygon's axis-aligned box."""
+    lo, hi = quads[0].min(axis=0), quads[0].max(axis=0)
+    tracker = DockingTracker(DockingConfig(shape_prior=shape_prior, seed=seed))
+    tracker.start(frames[0], np.r_[lo, hi - lo])
+    for frame in frames[1:]:
+        r = tracker.step(frame)
+    return abs(ag.to_params(r.matrix)[3] / ag.to_params(ag.from_quad(quads[-1]))[3] - 1)
+
+
+def test_the_silhouette_gives_the_aspect_a_loose_box_gets_wrong():
+    """From the loose box (the first polygon's axis-aligned box: aspect 1.36 against the truth's 1.98 on
+    this 20 deg turned approach) the aspect pull toward the start's aspect holds the wrong aspect to the
+    stop (error about 0.2); pulled toward the moving aircraft's silhouette the aspect at the stop is right.
+    Medians over 3 tracker seeds."""
+    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
+                                growth=4.0, turn_deg=20.0, difficulty=1)
+    frames, quads = scene_frames(config, 100)
+    start = np.median([stop_aspect_error(frames, quads, "start", s) for s in range(3)])
+    silhouette = np.median([stop_aspect_error(frames, quads, "silhouette", s) for s in range(3)])
+    assert silhouette < 0.1 and silhouette < start - 0.08, (start, silhouette)
