@@ -129,6 +129,8 @@ def _lbp_codes(g):
 def contour_image(gray: np.ndarray, edge_threshold: float) -> np.ndarray:
     """Binary contour image (uint8 0/1): ``|Laplacian| > edge_threshold`` (3x3 kernel, seed §2.1)."""
     lap = cv2.Laplacian(_gray(gray), cv2.CV_16S, ksize=1)
+    if 0 <= edge_threshold < 255:   # |lap| saturated at 255 tests the same; OpenCV's uint8 threshold is x > floor(t)
+        return cv2.threshold(cv2.convertScaleAbs(lap), edge_threshold, 1, cv2.THRESH_BINARY)[1]
     return (np.abs(lap) > edge_threshold).view(np.uint8)
 
 
