@@ -444,6 +444,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(window: for objects whose boxes vary in shape, e.g. vehicles at any heading)")
     p.add_argument("--keep-truncated", action="store_true", help="also use boxes cut by the frame border")
     p.add_argument("--jitter", type=int, default=2, help="randomly shifted/scaled copies per positive view")
+    p.add_argument("--jitter-shift", type=float, default=0.0,
+                   help="largest shift of a jittered copy, as a fraction of the window (0: half the mining stride)")
     p.add_argument("--photometric", type=float, default=0.0,
                    help="grey-level augmentation of the jittered copies (contrast, brightness, blur; 0: none, 1: strong)")
     p.add_argument("--turn-jitter", type=float, default=0.0,
@@ -496,7 +498,8 @@ def run(args) -> Cascade:
     say = lambda msg: print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)  # noqa: E731
     xp, heights = positive_vectors(data, window, cfg.feature_set, args.edge_threshold, args.rotate90,
                                    args.flips, args.keep_truncated, args.max_positives, rng, args.jitter,
-                                   args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5, args.positive_aspect,
+                                   args.jitter_shift or args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5,
+                                   args.positive_aspect,
                                    args.photometric, args.turn_jitter)
     say(f"{len(data)} images, {len(xp)} positive vectors")
     min_size = args.min_size or (float(np.percentile(heights, 2)) * 0.85 if len(heights) else 0.0)
@@ -515,7 +518,7 @@ def run(args) -> Cascade:
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     info = {"data": [str(p) for p in args.yolo + args.voc + args.bag],
             "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
-            "flips": args.flips, "jitter": args.jitter, "positive_aspect": args.positive_aspect,
+            "flips": args.flips, "jitter": args.jitter, "jitter_shift": args.jitter_shift or args.stride / 2 / LBP_SIZE, "positive_aspect": args.positive_aspect,
             "photometric": args.photometric, "turn_jitter": args.turn_jitter, "mining_angles": list(args.angles),
             "mining_stride": args.stride, "max_positives": args.max_positives, "seed": args.seed,
             "search_min_size": min_size, "search_max_size": max_size}
