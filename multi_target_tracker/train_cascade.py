@@ -30,7 +30,7 @@ import numpy as np
 from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments
 from aircraft_docking_tracker.geometry import box_iou
 from multi_target_tracker.cascade import Cascade, CascadeTrainConfig, train_cascade
-from multi_target_tracker.detector import scan_cascade, window_scales
+from multi_target_tracker.detector import map_back, scan_cascade, turned_view, window_scales
 from multi_target_tracker.features import FUSED_DIM, LBP_SIZE, FeatureConfig, LevelScan
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
@@ -337,8 +337,9 @@ class NegativeMiner:
 
     def __init__(self, data: list[LabelledImage], negative_images: list[Path], scan: dict, rotate90: bool,
                  negative_iou: float = 0.3, rng: np.random.Generator | None = None, pool_size: int = 200_000,
-                 progress: Callable[[str], None] | None = None):
+                 progress: Callable[[str], None] | None = None, angles: tuple = (0.0,)):
         self.data, self.negative_images = data, negative_images
+        self.angles = sorted({float(a) for a in angles})
         self.scan, self.rotate90, self.negative_iou = scan, rotate90, negative_iou
         self.rng = rng or np.random.default_rng(0)
         self.pool_size, self.pool = pool_size, None
@@ -361,21 +362,30 @@ class NegativeMiner:
 
     def _scan(self, cascade: Cascade, gray: np.ndarray, boxes: np.ndarray, per_image: int | None):
         """Accepted windows of one image away from its boxes: ``(vectors, how many were accepted)``;
-        ``per_image`` caps the vectors kept (spread over the pyramid levels), None keeps all."""
-        views = [(gray, boxes)]
-        if self.rotate90:
-            views.append((np.ascontiguousarray(gray.T), boxes[:, [1, 0, 3, 2]]))
+        ``per_image`` caps the vectors kept (spread over the pyramid levels), None keeps all.
+
+        The image is scanned as the detector scans it: turned by each of ``angles`` (``DetectorConfig.angles``)
+        and, with ``rotate90``, transposed too; a window of a turned view is compared with the boxes as the
+        upright box of its turned corners (``map_back``), and windows whose centre falls outside the image (on
+        the turned canvas' reflected border, which the detector drops) are never negatives."""
+        views = []
+        for angle in self.angles:
+            turned, back = turned_view(gray, angle)
+            views.append((turned, back, False))
+            if self.rotate90:
+                views.append((np.ascontiguousarray(turned.T), back, True))
+        size = gray.shape[::-1]
         found, accepted = [], 0
-        for g, b in views:
+        for g, back, transposed in views:
             n_levels = len(window_scales(cascade.window, g.shape[::-1], self.scan["scale_factor"],
                                          self.scan["min_size"], self.scan["max_size"]))
             cap = None if per_image is None else max(1, int(math.ceil(per_image / max(1, n_levels))))
 
-            def select(wins, b=b, cap=cap):
+            def select(wins, back=back, transposed=transposed, cap=cap):
                 nonlocal accepted
-                ok = np.arange(len(wins))
-                if len(b):
-                    ok = ok[box_iou(wins[:, None, :], b[None, :, :]).max(axis=1) < self.negative_iou]
+                framed, ok = map_back(wins[:, [1, 0, 3, 2]] if transposed else wins, np.arange(len(wins)), back, size)
+                if len(boxes) and len(ok):
+                    ok = ok[box_iou(framed[:, None, :], boxes[None, :, :]).max(axis=1) < self.negative_iou]
                 accepted += len(ok)
                 return ok if cap is None or len(ok) <= cap else self.rng.choice(ok, cap, replace=False)
 
@@ -434,6 +444,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(window: for objects whose boxes vary in shape, e.g. vehicles at any heading)")
     p.add_argument("--keep-truncated", action="store_true", help="also use boxes cut by the frame border")
     p.add_argument("--jitter", type=int, default=2, help="randomly shifted/scaled copies per positive view")
+    p.add_argument("--jitter-shift", type=float, default=0.0,
+                   help="largest shift of a jittered copy, as a fraction of the window (0: half the mining stride)")
     p.add_argument("--photometric", type=float, default=0.0,
                    help="grey-level augmentation of the jittered copies (contrast, brightness, blur; 0: none, 1: strong)")
     p.add_argument("--turn-jitter", type=float, default=0.0,
@@ -443,6 +455,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--negative-pool", type=int, default=200_000,
                    help="once all windows the cascade accepts fit in this many vectors (1152 bytes each), keep "
                    "them and stop scanning images (0: scan every stage)")
+    p.add_argument("--angles", nargs="*", type=float, default=[0.0],
+                   help="mine negatives in the image turned by each of these angles [deg] too, as the detector "
+                   "scans it (DetectorConfig.angles; with --rotate90 each view also transposed)")
     p.add_argument("--negative-iou", type=float, default=0.3, help="a negative window overlaps every box less")
     p.add_argument("--scale-factor", type=float, default=1.2, help="pyramid step while mining negatives")
     p.add_argument("--stride", type=int, default=4, choices=(2, 4, 8), help="scan stride while mining negatives")
@@ -483,7 +498,8 @@ def run(args) -> Cascade:
     say = lambda msg: print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)  # noqa: E731
     xp, heights = positive_vectors(data, window, cfg.feature_set, args.edge_threshold, args.rotate90,
                                    args.flips, args.keep_truncated, args.max_positives, rng, args.jitter,
-                                   args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5, args.positive_aspect,
+                                   args.jitter_shift or args.stride / 2 / LBP_SIZE, args.scale_factor ** 0.5,
+                                   args.positive_aspect,
                                    args.photometric, args.turn_jitter)
     say(f"{len(data)} images, {len(xp)} positive vectors")
     min_size = args.min_size or (float(np.percentile(heights, 2)) * 0.85 if len(heights) else 0.0)
@@ -497,13 +513,14 @@ def run(args) -> Cascade:
                  if p.suffix.lower() in IMAGE_SUFFIXES]
     miner = NegativeMiner(data, negatives, dict(scale_factor=args.scale_factor, stride=args.stride,
                                                 min_size=min_size, max_size=max_size),
-                          args.rotate90, args.negative_iou, rng, args.negative_pool, say)
+                          args.rotate90, args.negative_iou, rng, args.negative_pool, say, tuple(args.angles))
     say(f"mining negatives at window heights {min_size:.0f}..{max_size:.0f} px")
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     info = {"data": [str(p) for p in args.yolo + args.voc + args.bag],
             "include_prefix": args.include_prefix, "exclude_prefix": args.exclude_prefix,
-            "flips": args.flips, "jitter": args.jitter, "positive_aspect": args.positive_aspect,
-            "photometric": args.photometric, "turn_jitter": args.turn_jitter, "max_positives": args.max_positives, "seed": args.seed,
+            "flips": args.flips, "jitter": args.jitter, "jitter_shift": args.jitter_shift or args.stride / 2 / LBP_SIZE, "positive_aspect": args.positive_aspect,
+            "photometric": args.photometric, "turn_jitter": args.turn_jitter, "mining_angles": list(args.angles),
+            "mining_stride": args.stride, "max_positives": args.max_positives, "seed": args.seed,
             "search_min_size": min_size, "search_max_size": max_size}
 
     def save(cascade: Cascade) -> None:  # after every stage: an interrupted run still leaves a model

@@ -305,3 +305,25 @@ def test_boxes_clipped_one_pixel_inside_the_frame_count_as_cut():
     boxes = np.array([[0.0, 50, 40, 20], [1.0, 50, 40, 20], [50, 50, 40, 20], [50, 1.0, 40, 20],
                       [159.0 - 40, 50, 40, 20], [3.0, 50, 40, 20]])
     assert truncated(boxes, (160, 120)).tolist() == [True, True, False, True, True, False]
+
+
+def test_negative_miner_scans_the_detectors_turned_views(tiny_model, tmp_path):
+    """With ``angles`` the miner meets the windows the detector's scan meets (turned and transposed views,
+    mapped back to the image), minus those on a labelled box; without, it is the upright miner as before."""
+    _, cascade = tiny_model
+    one_stage = Cascade(cascade.window, cascade.feature_set, cascade.edge_threshold, cascade.stages[:1])
+    one_stage.save(tmp_path / "one.json")
+    image, boxes = _scene(np.random.default_rng(11), 3)
+    scan = dict(scale_factor=1.15, stride=4, min_size=20, max_size=30)
+    data = [LabelledImage("s", lambda: image, boxes)]
+    upright = NegativeMiner(data, [], scan, True, 0.3, np.random.default_rng(0))
+    same = NegativeMiner(data, [], scan, True, 0.3, np.random.default_rng(0), angles=(0.0,))
+    assert np.array_equal(upright._scan(one_stage, image, boxes, None)[0], same._scan(one_stage, image, boxes, None)[0])
+    turned = NegativeMiner(data, [], scan, True, 0.3, np.random.default_rng(0), angles=(0.0, 45.0))
+    vectors, accepted = turned._scan(one_stage, image, boxes, None)
+    detector = Detector(DetectorConfig(model=str(tmp_path / "one.json"), angles=[0.0, 45.0], orientation="both",
+                                       stride=4, scale_factor=1.15, min_size=20, max_size=30))
+    windows, _ = detector.raw(image, 0.0)
+    away = box_iou(windows[:, None, :], boxes[None, :, :]).max(axis=1) < 0.3
+    assert accepted == len(vectors) == int(away.sum())
+    assert accepted > upright._scan(one_stage, image, boxes, None)[1]

@@ -101,3 +101,26 @@ def test_features_never_import_the_cascade():
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)} | \
         {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     assert not any(m and m.startswith("multi_target_tracker") for m in imported), imported
+
+
+@pytest.mark.parametrize("threshold", [0.0, 0.5, 39.9, 40.0, 40.5, 254.5, 255.0, 300.0])
+def test_contour_image_is_the_thresholded_absolute_laplacian(threshold):
+    """The saturating OpenCV path (thresholds below 255) and the plain one give |Laplacian| > threshold exactly."""
+    rng = np.random.default_rng(int(threshold * 10))
+    for gray in (rng.integers(0, 256, (40, 60), dtype=np.uint8),
+                 cv2.GaussianBlur(rng.integers(0, 256, (40, 60), dtype=np.uint8), (0, 0), 1.5)):
+        lap = cv2.Laplacian(gray, cv2.CV_16S, ksize=1)
+        assert np.array_equal(F.contour_image(gray, threshold), (np.abs(lap) > threshold).astype(np.uint8))
+
+
+def test_lbp_codes_match_eight_shifted_comparisons():
+    """The compiled LBP kernel against the definition (neighbour k sets bit k when >= the centre)."""
+    rng = np.random.default_rng(5)
+    neighbours = ((-1, -1), (-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1))
+    for gray in (rng.integers(0, 256, (37, 53), dtype=np.uint8), rng.integers(100, 103, (20, 9), dtype=np.uint8),
+                 np.asfortranarray(rng.integers(0, 256, (12, 30), dtype=np.uint8))):
+        h, w = gray.shape
+        want = np.zeros((h - 2, w - 2), np.uint8)
+        for bit, (dy, dx) in enumerate(neighbours):
+            want |= (gray[1 + dy:h - 1 + dy, 1 + dx:w - 1 + dx] >= gray[1:-1, 1:-1]).astype(np.uint8) << bit
+        assert np.array_equal(F.lbp_codes(gray), want)

@@ -35,7 +35,7 @@ from aircraft_docking_tracker.scenarios import render
 CLASS_CAR, CLASS_CAMO = 0, 1
 STATE_VISIBLE, STATE_HIDDEN = 1, 2
 SPRITE_SUPERSAMPLE = 4
-# The camera height the UAV set-up (config/uav_camera.yaml, uav_vehicles_heading.json) is made for: 3x lower
+# The camera height the UAV set-up (config/uav_camera.yaml, uav_vehicles_heading_all_views.json) is made for: 3x lower
 # than the scene's default, so that vehicles' shorter box sides are >= 33 px (5th percentile 39 px)
 # instead of >= 10 px; see README "The UAV camera".
 UAV_SETUP_GROUND_RESOLUTION = 3.0
