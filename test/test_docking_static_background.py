@@ -120,10 +120,11 @@ def scene_frames(config, seed):
 
 
 def stop_scale_ratio(frames, quads, extent_gain, seed):
-    # the extent's own effect: the target motion (motion_gain, on by default) off in both arms; with it on,
-    # this scene's estimate stays tilted ~10 deg after the turn and the extent's rectangle at the stop
-    # grows to ~1.45x the truth (README, docking section, session 6)
-    tracker = DockingTracker(DockingConfig(extent_gain=extent_gain, motion_gain=0.0, seed=seed))
+    # the shipped defaults otherwise (the target motion on): the extent is skipped while no corner under X̂
+    # moves (extent_still), which needs the motion measured. With the motion off, the running background
+    # absorbs the stopped aircraft and the extent grew the scale to 1.47-1.53x the truth in the last 10
+    # frames for 3 of 5 tracker seeds on an AVX BLAS (OPENBLAS_CORETYPE=Sandybridge; 0 of 5 on Haswell)
+    tracker = DockingTracker(DockingConfig(extent_gain=extent_gain, seed=seed))
     tracker.start(frames[0], quads[0])
     for frame in frames[1:]:
         r = tracker.step(frame)
@@ -131,13 +132,14 @@ def stop_scale_ratio(frames, quads, extent_gain, seed):
 
 
 def test_extent_correction_keeps_the_scale_up_with_a_growing_aircraft():
-    """A 4x approach from the first polygon: without the foreground the estimate lags (about 0.75 of
-    the true scale at the stop on this scene), with it the lag is mostly gone. Medians over 3 seeds."""
+    """A 4x approach from the first polygon: without the foreground the estimate lags (0.74-0.83 of the
+    true scale at the stop on this scene), with it the lag is gone (medians 1.00-1.05 under the Haswell,
+    Sandybridge, Prescott and SkylakeX BLAS kernels). Medians over 5 tracker seeds."""
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
     frames, quads = scene_frames(config, 100)
-    without = np.median([stop_scale_ratio(frames, quads, 0.0, s) for s in range(3)])
-    with_fg = np.median([stop_scale_ratio(frames, quads, 0.3, s) for s in range(3)])
+    without = np.median([stop_scale_ratio(frames, quads, 0.0, s) for s in range(5)])
+    with_fg = np.median([stop_scale_ratio(frames, quads, 0.3, s) for s in range(5)])
     assert with_fg > without + 0.1
     assert 0.85 < with_fg < 1.15
 
