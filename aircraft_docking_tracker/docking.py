@@ -33,6 +33,7 @@ from . import affine_group as ag
 from .config import ConfigError, param
 from .geometry import box_iou
 from .ispf import FilterConfig, make_filter
+from .object_table import table_boxes
 
 TRACKING, LOST, WAITING = 0, 1, 2
 STATE_NAMES = {TRACKING: "tracking", LOST: "lost", WAITING: "waiting"}
@@ -106,7 +107,7 @@ def best_detection(table: np.ndarray | None, class_id: int = -1, min_score: floa
     """Box (x, y, w, h) of the highest-scoring valid row of ``class_id`` (-1: any), or None."""
     if table is None or len(table) == 0:
         return None
-    boxes = np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(float)
+    boxes = table_boxes(table)
     scores = np.asarray(table["score"], dtype=float)
     # finite, inside any plausible image (|v| < 1e6 px) and of positive size
     ok = (np.abs(boxes) < 1e6).all(axis=1) & (boxes[:, 2] > 0) & (boxes[:, 3] > 0) & (scores >= min_score)
@@ -190,11 +191,10 @@ class DockingTracker:
         if detections is None or len(detections) == 0:
             return None
         rows = detections if cfg.detection_class < 0 else detections[detections["class_id"] == cfg.detection_class]
-        best = best_detection(rows, cfg.detection_class, cfg.min_detection_score)
+        best = best_detection(rows, min_score=cfg.min_detection_score)
         if best is None:
             return None
-        boxes = np.stack([rows["x"], rows["y"], rows["w"], rows["h"]], axis=1).astype(float)
-        if (box_iou(boxes, ag.to_box(self.filter.estimate)) >= cfg.override_iou).any():
+        if (box_iou(table_boxes(rows), ag.to_box(self.filter.estimate)) >= cfg.override_iou).any():
             self._away, self._away_box = 0, None
             return None
         same_place = self._away_box is not None and box_iou(best, self._away_box) >= 0.3

@@ -431,8 +431,7 @@ class AffineParticleFilter:
         if foreground is None:
             self.extent_counts["untrusted"] += 1
             return None
-        if (self.config.extent_still == "skip" and self.background.measure_motion
-                and self.background.motion is None):
+        if self.config.extent_still == "skip" and self.background.target_still:
             self.extent_counts["still"] += 1
             return None
         extent = foreground_extent(foreground, estimate, self.background.scale)
@@ -445,8 +444,7 @@ class AffineParticleFilter:
             q[0, 4] += float(np.clip(extent.axis_angle, -self.config.extent_rotation, self.config.extent_rotation))
             candidate = from_chart(q)[0]
             extent = foreground_extent(foreground, candidate, self.background.scale) or extent
-        if not (0.6 < extent.width < 1.5 and 0.6 < extent.height < 1.5
-                and abs(extent.centre_u) < 0.3 and abs(extent.centre_v) < 0.3):
+        if not _plausible(extent):
             self.extent_counts["implausible"] += 1
             return None
         measured = candidate @ extent.correction()
@@ -464,12 +462,11 @@ class AffineParticleFilter:
         foreground = self.background.foreground
         if foreground is None:
             return
-        if self.background.measure_motion and self.background.motion is None:
+        if self.background.target_still:
             self.shape_counts["still"] += 1
             return
         extent = foreground_extent(foreground, estimate, self.background.scale)
-        if extent is None or not (0.6 < extent.width < 1.5 and 0.6 < extent.height < 1.5
-                                  and abs(extent.centre_u) < 0.3 and abs(extent.centre_v) < 0.3):
+        if extent is None or not _plausible(extent):
             return
         turn = (extent.axis_angle + np.pi / 2) % np.pi - np.pi / 2
         log_elongation = float(np.log(max(extent.elongation, 1.0)))
@@ -633,6 +630,13 @@ class ISPF(AffineParticleFilter):
             scores = np.concatenate([scores, new_scores])                           # 6h
             patches = np.concatenate([patches, new_patches])
         return self._finish(states, scores, patches)                    # steps 7-9
+
+
+def _plausible(extent) -> bool:
+    """A silhouette's rectangle the estimate may follow: sides 0.6-1.5x the estimate's, centre within 0.3
+    sides of its (not another object merged, not a partial silhouette)."""
+    return (0.6 < extent.width < 1.5 and 0.6 < extent.height < 1.5
+            and abs(extent.centre_u) < 0.3 and abs(extent.centre_v) < 0.3)
 
 
 def make_filter(config: FilterConfig) -> AffineParticleFilter:

@@ -30,6 +30,12 @@ def empty(dtype: np.dtype) -> np.ndarray:
     return np.zeros(0, dtype=dtype)
 
 
+def table_boxes(table: np.ndarray) -> np.ndarray:
+    """``(N, 4)`` float64 array ``x, y, w, h`` (top-left corner, pixels) of any table with those fields
+    (detections, tracks, MOTChallenge rows)."""
+    return np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(np.float64)
+
+
 def table_to_cloud(table: np.ndarray, header=None):
     """A PointCloud2 (height 1, one point per row, little-endian, dense) holding ``table``."""
     from sensor_msgs.msg import PointCloud2, PointField  # noqa: PLC0415

@@ -133,6 +133,11 @@ class StaticBackground:
         self.foreground, self.trusted, self.motion = None, False, None
         self.still_run = self.still_frames + 1         # a stand camera: still until a frame says otherwise
 
+    @property
+    def target_still(self) -> bool:
+        """The motion is measured on this frame and no corner under the estimate moved (``motion`` None)."""
+        return self.measure_motion and self.motion is None
+
     def observe(self, frame: np.ndarray, state: np.ndarray) -> np.ndarray | None:
         """F of ``frame`` given the target near ``state`` (None if untrusted); then B moves toward it."""
         image = _level_image(frame, self.level)

@@ -32,7 +32,8 @@ from aircraft_docking_tracker.bag import stamp_to_ns
 from aircraft_docking_tracker.config import param
 from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.node_base import PerceptionNode, run_node
-from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
+from aircraft_docking_tracker.object_table import (DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_boxes,
+                                                   table_to_cloud)
 from aircraft_docking_tracker.processing import (DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected,
                                                  best_rows)
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker, Tracks
@@ -120,7 +121,7 @@ class AssociationProcessor(MessageProcessor):
         stamp = stamp_to_ns(msg.header.stamp)
         rows = best_rows(cloud_to_table(msg, DETECTION_DTYPE), self.node.max_detections, self.report_rejection,
                          "detections")
-        boxes = np.stack([rows["x"], rows["y"], rows["w"], rows["h"]], axis=1).astype(np.float64)
+        boxes = table_boxes(rows)
         result = self.tracker.step(stamp * 1e-9, boxes, rows["score"], rows["class_id"])
         if result.rejected:
             self.invalid_detections += result.rejected

@@ -19,6 +19,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from aircraft_docking_tracker.geometry import box_iou
+from aircraft_docking_tracker.object_table import table_boxes as boxes  # noqa: F401 (MOT rows: x, y, w, h)
 
 #: One MOTChallenge row. ``cls`` and ``visibility`` are -1 where the file does not give them.
 MOT_ROW_DTYPE = np.dtype([
@@ -97,10 +98,6 @@ def read_ground_truth(path: str | Path, classes: Iterable[int] | None = None, ma
         rows = rows[np.isin(rows["cls"], list(classes)) | (rows["cls"] == -1)]
     return rows
 
-
-def boxes(rows: np.ndarray) -> np.ndarray:
-    """``(N, 4)`` float64 array ``x, y, w, h`` (top-left corner, pixels) of MOT rows."""
-    return np.stack([rows["x"], rows["y"], rows["w"], rows["h"]], axis=1).astype(np.float64)
 
 
 def frames(rows: np.ndarray, first: int | None = None, last: int | None = None) -> Iterator[tuple[int, np.ndarray]]:

@@ -46,12 +46,11 @@ from aircraft_docking_tracker.evaluation.sot_metrics import SotMetricsConfig, sc
 from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from aircraft_docking_tracker.evaluation.speed import latency_percentiles, stream_fps
 from aircraft_docking_tracker.images import to_bgr8
-from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table
+from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table, table_boxes
 from aircraft_docking_tracker.scenarios.datasets import mot_rows_to_tracks, read_results_regions, read_sot_boxes
 from aircraft_docking_tracker.scenarios.messages import (DETECTIONS, DOCKING_POLYGON, GROUND_TRUTH, GT_NOSE,
                                                         GT_POLYGON, GT_STAND, IMAGE, TRACKS, polygon_to_quad)
 from multi_target_tracker import motchallenge
-from multi_target_tracker.motchallenge import boxes as _boxes
 
 OUTPUT_TOPICS = (DOCKING_POLYGON, TRACKS, DETECTIONS)
 
@@ -235,13 +234,13 @@ def score_mot(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
             hyp = hyp[np.isin(hyp["state"], states)]
         hidden = hidden_rows(truth, cfg)
         if hidden.any() and len(hyp):      # drop hypotheses that sit on a hidden target (distractors)
-            iou_hidden = box_iou(_boxes(hyp)[:, None], _boxes(truth[hidden])[None]).max(axis=1)
-            visible_boxes = _boxes(truth[~hidden])
-            iou_visible = (box_iou(_boxes(hyp)[:, None], visible_boxes[None]).max(axis=1)
+            iou_hidden = box_iou(table_boxes(hyp)[:, None], table_boxes(truth[hidden])[None]).max(axis=1)
+            visible_boxes = table_boxes(truth[~hidden])
+            iou_visible = (box_iou(table_boxes(hyp)[:, None], visible_boxes[None]).max(axis=1)
                            if len(visible_boxes) else np.zeros(len(hyp)))
             hyp = hyp[~((iou_hidden >= cfg.iou_threshold) & (iou_hidden > iou_visible))]
         truth = truth[~hidden]
-        evaluator.update(frame, truth["id"], _boxes(truth), hyp["id"], _boxes(hyp))
+        evaluator.update(frame, truth["id"], table_boxes(truth), hyp["id"], table_boxes(hyp))
     scores = evaluator.result()
     result = scores.as_dict(with_continuity=True)
     result["missing_outputs"] = missing
@@ -270,7 +269,7 @@ def score_detection(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
         if dets is None:
             missing += 1
             dets = np.zeros(0, [("x", "f4"), ("y", "f4"), ("w", "f4"), ("h", "f4"), ("score", "f4")])
-        acc.add_frame(_boxes(dets), dets["score"], _boxes(truth), hidden_rows(truth, cfg))
+        acc.add_frame(table_boxes(dets), dets["score"], table_boxes(truth), hidden_rows(truth, cfg))
     result = acc.summary()
     result["missing_outputs"] = missing
     return result
@@ -455,7 +454,7 @@ def annotated_frames(output_bag: str | Path, gt_bag: str | Path | None = None, c
                 if table_topic in streams and stamp in streams[table_topic].values else None
             labels = table["id"].tolist() if table is not None and "id" in table.dtype.names else None
             hidden = hidden_rows(table, EvaluateConfig()) if table is not None and streams is gts else None
-            image = plots.draw_annotations(image, quads=quads, boxes=_boxes(table) if table is not None else (),
+            image = plots.draw_annotations(image, quads=quads, boxes=table_boxes(table) if table is not None else (),
                                            color=color, labels=labels, hidden=hidden)
         yield k, image
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from multi_target_tracker.motchallenge import boxes as table_boxes
+from aircraft_docking_tracker.object_table import table_boxes
 
 GT_COLOR = (60, 220, 60)          # BGR
 RESULT_COLOR = (230, 40, 230)
