@@ -26,7 +26,7 @@ from aircraft_docking_tracker.images import ImageConversionError, compressed_dim
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
 from aircraft_docking_tracker.processing import MessageProcessor, ProcessingStats, process_guarded
 from aircraft_docking_tracker.scenarios.faults import png_bomb
-from multi_target_tracker import motchallenge as mc
+from aircraft_docking_tracker import motchallenge as mc
 from multi_target_tracker.association_node import AssociationProcessor
 from multi_target_tracker.cascade import Cascade, CascadeError
 from multi_target_tracker.detector import MODELS_DIR, DetectorConfig

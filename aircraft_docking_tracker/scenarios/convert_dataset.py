@@ -31,7 +31,7 @@ from aircraft_docking_tracker.scenarios import datasets
 from aircraft_docking_tracker.scenarios import messages as m
 from aircraft_docking_tracker.scenarios.datasets import DatasetError
 from aircraft_docking_tracker.scenarios.render import frame_stamp_ns
-from multi_target_tracker import motchallenge
+from aircraft_docking_tracker import motchallenge
 
 DEFAULT_FPS = {"sot": 30.0, "mot": 25.0, "detect": 10.0}
 
