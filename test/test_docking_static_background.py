@@ -5,7 +5,7 @@ import pytest
 from aircraft_docking_tracker import affine_group as ag
 from aircraft_docking_tracker.docking import DockingConfig, DockingTracker
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
-from aircraft_docking_tracker.static_background import StaticBackground, foreground_extent, target_motion
+from aircraft_docking_tracker.static_background import StaticBackground, foreground_extent, state_mask, target_motion
 
 SIZE = (240, 320)
 
@@ -229,6 +229,55 @@ def test_target_motion_is_none_for_a_still_target_or_a_camera_that_follows_it():
     before = paste(empty, patch, centre)
     assert target_motion(before, paste(empty, patch, centre), state, 1.0) is None
     assert target_motion(before, paste(empty, patch, centre, dx=4.0), state, 1.0) is None
+
+
+def panning_clip(speed: float, n: int = 30, seed: int = 3):
+    """A camera panning ``speed`` px a frame over a textured stand, a target that moves with it (as a chase
+    camera keeps it) and a caption burnt into the picture that does not move (as TinyTLP CarChase2's)."""
+    import cv2  # noqa: PLC0415
+
+    rng = np.random.default_rng(seed)
+    wide = np.hstack([stand(np.random.default_rng(seed + 1)), stand(np.random.default_rng(seed + 2))])
+    caption = np.where(rng.random((14, 90)) < 0.5, 30, 230).astype(np.uint8)
+    box = (140, 100, 40, 20)
+    frames = []
+    for i in range(n):
+        frame = with_target(cv2.warpAffine(wide, np.float32([[1, 0, -speed * i], [0, 1, 0]]), SIZE[::-1]), box, rng=rng)
+        frame[8:22, 220:310] = caption
+        frames.append(frame)
+    return frames, ag.from_box(*box)
+
+
+def test_a_slow_pan_that_passes_the_shift_test_is_judged_moving_and_a_rainy_stand_still():
+    """The stale-background test (``camera_moving``): a pan of 1 px a frame with a fixed caption passes the
+    per-frame shift test (phase correlation median < max_shift / 2) but its stale ratio ends above 1.3x
+    max_stale and the camera counts as moving from frame 10 on, nothing trusted; rainy synthetic stands
+    are never judged moving, their ratio (once the window is full) below max_stale / 1.3."""
+    from aircraft_docking_tracker.static_background import _level_image  # noqa: PLC0415
+
+    frames, state = panning_clip(1.0)
+    model = StaticBackground(motion=True)
+    model.start(frames[0], state)
+    shifts, moving, trusted = [], [], []
+    for frame in frames[1:]:
+        image = _level_image(frame, model.level)
+        shifts.append(model.camera_shift(image, state_mask(state, model.guard, image.shape, model.scale) == 0))
+        model.observe(frame, state)
+        moving.append(model.camera_moving)
+        trusted.append(model.trusted or model.motion is not None)
+    assert np.median(shifts) < model.max_shift / 2          # what the shift test alone let through
+    assert all(moving[9:]) and not any(trusted[9:])
+    assert model.stale_ratio > 1.3 * model.max_stale
+    for seed in (0, 1):
+        frames, quads = scene_frames(DockingSceneConfig(width=320, height=240, frames=40, weather="rain"), seed)
+        model = StaticBackground()
+        model.start(frames[0], ag.from_quad(quads[0]))
+        ratios = []
+        for frame, quad in zip(frames[1:], quads[:-1]):
+            model.observe(frame, ag.from_quad(quad))
+            assert not model.camera_moving
+            ratios.append(model.stale_ratio)
+        assert max(ratios[model.stale_window:]) < model.max_stale / 1.3
 
 
 def test_a_moving_camera_gives_no_motion_until_it_has_been_still_again():
