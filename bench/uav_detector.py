@@ -15,6 +15,13 @@
   counts the ground truth (every vehicle at least 30 % visible, border-cut ones included). Pooled over
   all frames, and per seed the mean and the worst (seeds with at least 10 counted vehicles: at this
   camera height a seed's frames may show only a few).
+* **Group confidence** (issue 12's "calibrated last-stage threshold"): a detection is a group of windows
+  that pass the cascade; the set-up's confidence is the number of windows in it (``min_neighbors``). Beside
+  it, from the same windows and groups: the members' last-stage margins above ``window_margin`` summed
+  (OpenCV's level weights, a sum of the final stage's boosted sums over its threshold) and the best member's
+  margin. Each confidence's threshold is chosen on the tuning seeds (``UAV_TUNING_SEEDS``: best detection
+  minus false alarms, pooled) and applied unchanged to the evaluation seeds; also each one's AP and its
+  detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
   side by side in this run: the set-up (its size range from the known altitude) against the same
   model scanning every window size that fits the frame, the previous heading-aligned set-up (``PREVIOUS``),
@@ -33,18 +40,19 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.special import expit
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
 from aircraft_docking_tracker.config import from_mapping, package_config_dir  # noqa: E402
-from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
+from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, detection_summary  # noqa: E402
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
-    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UavScene, UavSceneConfig, detection_truth)
-from multi_target_tracker.detector import Detector, DetectorConfig  # noqa: E402
+    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
+from multi_target_tracker.detector import Detector, DetectorConfig, group_members, suppress_contained  # noqa: E402
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
 
 SETUP = "uav_camera.yaml"
@@ -117,6 +125,78 @@ def run(det: Detector, items) -> dict:
             "fps": fps(latencies), **latency_percentiles(latencies)}
 
 
+TUNING = [(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] + [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)]
+CONFIDENCES = {"count": "windows in the group + logistic of the best margin (the set-up's score; threshold: "
+                        "min_neighbors)",
+               "margin_sum": "members' last-stage margins above window_margin, summed (level weights)",
+               "best_margin": "best member's last-stage margin"}
+
+
+def group_confidences(det: Detector, gray: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The set-up's groups of one frame (every group, none dropped; boxes as ``detect`` scales them) and each
+    confidence of :data:`CONFIDENCES` per group."""
+    cfg = det.config
+    boxes, margins = det.raw(gray)
+    boxes, margins, label, seeds = group_members(boxes, margins, cfg.group_iou)
+    if len(seeds) == 0:
+        return np.zeros((0, 4)), {name: np.zeros(0) for name in CONFIDENCES}
+    counts = np.bincount(label, minlength=len(seeds))
+    sums = np.zeros((len(seeds), 4))
+    np.add.at(sums, label, boxes)
+    group_boxes = sums / counts[:, None]
+    k = cfg.box_scale
+    group_boxes = np.column_stack([group_boxes[:, :2] + (1 - k) * group_boxes[:, 2:] / 2, group_boxes[:, 2:] * k])
+    return group_boxes, {"count": counts + expit(margins[seeds]),
+                         "margin_sum": np.bincount(label, weights=margins - cfg.window_margin, minlength=len(seeds)),
+                         "best_margin": margins[seeds]}
+
+
+def confidence_runs(det: Detector, seeds: list[tuple[int, int]]) -> dict:
+    """Per confidence, per seed: the ``(scores, true-positive flags, counted vehicles)`` of every group
+    after containment suppression ordered by that confidence (a threshold keeps a prefix of them)."""
+    out = {name: [] for name in CONFIDENCES}
+    for seed, difficulty in seeds:
+        accs = {name: DetectionAccumulator() for name in CONFIDENCES}
+        for gray, boxes, ignore, _ in frames_of(seed, difficulty, UAV_SETUP_GROUND_RESOLUTION):
+            group_boxes, confidences = group_confidences(det, gray)
+            for name, conf in confidences.items():
+                keep = suppress_contained(group_boxes, conf, det.config.containment)
+                accs[name].add_frame(group_boxes[keep], conf[keep], boxes, ignore)
+        for name, acc in accs.items():
+            out[name].append((np.asarray(acc.scores), np.asarray(acc.is_tp, bool), acc.n_gt))
+    return out
+
+
+def _rates(runs, threshold: float) -> tuple[float, float]:
+    tp = sum(int(t[s >= threshold].sum()) for s, t, _ in runs)
+    n_det = sum(int((s >= threshold).sum()) for s, _, _ in runs)
+    return tp / max(sum(n for _, _, n in runs), 1), 1 - tp / max(n_det, 1)
+
+
+def confidence_summary(tuning: dict, held_out: dict) -> dict:
+    """Threshold of each confidence chosen on the tuning runs, its rates on the held-out runs (pooled, per seed)."""
+    out = {}
+    for name in CONFIDENCES:
+        thresholds = np.unique(np.concatenate([s for s, _, _ in tuning[name]]))
+        tuned = [(d - f, t, d, f) for t in thresholds for d, f in [_rates(tuning[name], t)]]
+        _, threshold, tune_det, tune_fa = max(tuned)
+        det_, fa = _rates(held_out[name], threshold)
+        per_seed = [_rates([r], threshold) for r in held_out[name] if r[2] >= MIN_SEED_BOXES]
+        scores = np.concatenate([s for s, _, _ in held_out[name]])
+        is_tp = np.concatenate([t for _, t, _ in held_out[name]])
+        curve = detection_summary(scores, is_tp, sum(n for _, _, n in held_out[name]))
+        recall, precision = np.asarray(curve["pr_recall"]), np.asarray(curve["pr_precision"])
+        at = lambda cap: float(recall[1 - precision <= cap].max()) if (1 - precision <= cap).any() else 0.0  # noqa: E731
+        out[name] = {"threshold": float(threshold), "tuning_detection": tune_det, "tuning_false_alarms": tune_fa,
+                     "detection": det_, "false_alarms": fa,
+                     "detection_worst": min(d for d, _ in per_seed), "false_alarms_worst": max(f for _, f in per_seed),
+                     "detection_mean": float(np.mean([d for d, _ in per_seed])),
+                     "false_alarms_mean": float(np.mean([f for _, f in per_seed])),
+                     "average_precision": curve["average_precision"], "detection_at_fa_015": at(0.15),
+                     "detection_at_fa_030": at(0.30)}
+    return out
+
+
 def spread(per_seed: list[dict]) -> dict:
     pooled_tp = sum(r["detection_rate"] * r["ground_truth"] for r in per_seed)
     pooled_gt = sum(r["ground_truth"] for r in per_seed)
@@ -180,6 +260,7 @@ def main() -> int:
     for key in ("setup_results", "full_pyramid", "previous", "upright", "former", "other_seed"):
         if results[key]:
             results[key + "_summary"] = spread(results[key])
+    results["confidences"] = confidence_summary(confidence_runs(det, TUNING), confidence_runs(det, seeds))
     results["setup_results_difficulty_1_summary"] = spread(
         [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
     (HERE / "results").mkdir(exist_ok=True)
@@ -233,6 +314,17 @@ def markdown(results: dict) -> str:
                   "point", previous),
              line("previous set-up: upright 3:2 model uav_vehicles_low.json, 0/90 degrees only", upright),
              line(f"former set-up (default altitude, 21x14 model, windows from 14 px; every 2nd frame)", former),
+             "", "Group confidence (threshold chosen on the 18 tuning seeds, best detection minus false alarms pooled, "
+             "then applied to the evaluation seeds above; AP and detection at a false-alarm cap from the evaluation "
+             "seeds' own PR curve):", "",
+             "| confidence | threshold | tuning: detection / false alarms | evaluation pooled: detection / false alarms | "
+             "per seed mean: detection / false alarms | worst seed: detection / false alarms | AP | detection at "
+             "false alarms <= 0.15 / 0.30 |", "|---|---|---|---|---|---|---|---|",
+             *[f"| {CONFIDENCES[n]} | {c['threshold']:.2f} | {c['tuning_detection']:.3f} / {c['tuning_false_alarms']:.3f} | "
+               f"{c['detection']:.3f} / {c['false_alarms']:.3f} | {c['detection_mean']:.3f} / {c['false_alarms_mean']:.3f} | "
+               f"{c['detection_worst']:.3f} / {c['false_alarms_worst']:.3f} | {c['average_precision']:.3f} | "
+               f"{c['detection_at_fa_015']:.3f} / {c['detection_at_fa_030']:.3f} |"
+               for n, c in results["confidences"].items()],
              "", f"Targets (issue 12): detection >= {TARGET_DETECTION} at false alarms <= {TARGET_FALSE_ALARMS}; "
              f">= {TARGET_FPS:g} frames/s at 640x480 on one core."]
     return "\n".join(rows) + "\n"

@@ -336,6 +336,20 @@ def _group_labels(boxes, group_iou):
     return label, seeds[:groups]
 
 
+def group_members(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3):
+    """The groups of :func:`group_windows` before any is dropped: ``(boxes, margins, label, seeds)`` with the
+    windows sorted best margin first, each window's group label and each group's seed (best) window.
+    Benchmarks score other group confidences from it (e.g. the members' summed margins)."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    margins = np.asarray(margins, np.float64).reshape(-1)
+    order = np.argsort(-margins, kind="stable")
+    boxes, margins = np.ascontiguousarray(boxes[order]), margins[order]
+    if len(boxes) == 0:
+        return boxes, margins, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    label, seeds = _group_labels(boxes, float(group_iou))
+    return boxes, margins, label, seeds
+
+
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
                   containment: float = 0.4, max_detections: int = 500) -> tuple[np.ndarray, np.ndarray]:
     """Raw windows ``(n, 4)`` and their last-stage margins -> grouped ``(boxes, scores)``, best first.
@@ -343,13 +357,9 @@ def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     See the module docstring: mean box per group, score = windows in the group + logistic of the best
     margin, groups smaller than ``min_neighbors`` dropped, contained groups suppressed.
     """
-    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
-    margins = np.asarray(margins, np.float64).reshape(-1)
-    order = np.argsort(-margins, kind="stable")
-    boxes, margins = np.ascontiguousarray(boxes[order]), margins[order]
+    boxes, margins, label, seeds = group_members(boxes, margins, group_iou)
     if len(boxes) == 0:
         return np.zeros((0, 4)), np.zeros(0)
-    label, seeds = _group_labels(boxes, float(group_iou))
     counts = np.bincount(label, minlength=len(seeds))
     sums = np.zeros((len(seeds), 4))
     np.add.at(sums, label, boxes)          # members in window order, as a per-group mean adds them
