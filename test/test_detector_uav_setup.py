@@ -6,7 +6,6 @@ with margin: bench/uav_detector.py measures the set-up on more seeds (see its ta
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
 
@@ -62,7 +61,7 @@ def _counts(detector, seed: int) -> tuple[int, int, int]:
     acc = DetectionAccumulator()
     for k, frame in enumerate(UavScene(config, seed=seed).frames()):
         if k % 8 == 4:
-            table = detector.detect(cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY))
+            table = detector.detect(frame.image)          # BGR: the set-up's colour verifier reads it
             boxes, ignore = detection_truth(frame.ground_truth)
             acc.add_frame(np.column_stack([table["x"], table["y"], table["w"], table["h"]]), table["score"],
                           boxes, ignore)
