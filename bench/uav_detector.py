@@ -19,12 +19,15 @@
   that pass the cascade; the set-up's confidence is the number of windows in it (``min_neighbors``). Beside
   it, from the same windows and groups: the members' last-stage margins above ``window_margin`` summed
   (OpenCV's level weights, a sum of the final stage's boosted sums over its threshold) and the best member's
-  margin. Each confidence's threshold is chosen on the tuning seeds (``UAV_TUNING_SEEDS``: best detection
+  margin, and the set-up's colour verifier (``multi_target_tracker/verifier.py``: colour of the group's box and
+  its cascade evidence; groups of at least ``VERIFIER_MIN_WINDOWS`` windows compared). Each confidence's
+  threshold is chosen on the tuning seeds (``UAV_TUNING_SEEDS``: best detection
   minus false alarms, pooled) and applied unchanged to the evaluation seeds; also each one's AP and its
   detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
   side by side in this run: the set-up (its size range from the known altitude) against the same
-  model scanning every window size that fits the frame, the previous heading-aligned set-up (``PREVIOUS``),
+  model scanning every window size that fits the frame, the same cascade without the colour verifier
+  (``CASCADE_ONLY``, the set-up before it), the previous heading-aligned set-up (``PREVIOUS``),
   the upright set-up before it at this altitude (upright 3:2 model, 0 and 90 degrees only: ``UPRIGHT``) and
   the former set-up (21x14 model at the default altitude, windows from 14 px).
 
