@@ -49,8 +49,8 @@ def scene_frames(seed: int, difficulty: int, every: int):
             yield frame.image, boxes, ignore
 
 
-def cascade_detector() -> Detector:
-    detector = build_processor("detector", package_config_dir() / SETUP, {"verifier": ""}).detector
+def cascade_detector(overrides: dict | None = None) -> Detector:
+    detector = build_processor("detector", package_config_dir() / SETUP, {"verifier": "", **(overrides or {})}).detector
     if detector is None:
         raise SystemExit(f"{SETUP}: the detector cannot be built")
     return detector
@@ -114,15 +114,18 @@ def main() -> int:
     parser.add_argument("--min-windows", type=int, default=3, help="smallest group used as a training sample")
     parser.add_argument("--min-neighbors", type=int, nargs="+", default=[3, 4, 6, 8])
     parser.add_argument("--l2", type=float, default=1e-3)
+    parser.add_argument("--window-margin", type=float, default=None, help="the cascade's window_margin (default: "
+                        "the set-up's)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
-    det = cascade_detector()
+    det = cascade_detector({} if args.window_margin is None else {"window_margin": args.window_margin})
     first = UAV_TRAIN_SEEDS.start
     train = ([(first + k, 1) for k in range(args.train_scenes)] +
              [(first + 100 + k, 2) for k in range(args.train_scenes // 2)])
     x, y = samples(det, train, args.min_windows)
     verifier = fit_verifier(x, y, args.l2)
     verifier.info.update({"train_seeds": [s for s, _ in train], "cascade": Path(det.config.model).name,
+                          "window_margin": det.config.window_margin,
                           "min_windows": args.min_windows})
     out = Path(args.out)
     verifier.save(out)
