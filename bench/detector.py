@@ -105,7 +105,8 @@ def evaluate(det: Detector, items) -> tuple[dict, dict]:
 
 
 def synthetic_items(kind: str, seed: int, frames: int, every: int):
-    """Held-out synthetic frames (not in the models' training bags) as ``(gray, boxes, ignore flags)``."""
+    """Held-out synthetic frames (not in the models' training bags) as ``(bgr, boxes, ignore flags)`` (BGR: the
+    UAV set-up's colour verifier reads it; the detector converts to grey itself)."""
     if kind == "uav":
         from aircraft_docking_tracker.scenarios.uav import (  # noqa: PLC0415
             UAV_SETUP_GROUND_RESOLUTION, UavScene, UavSceneConfig, detection_truth)
@@ -119,13 +120,12 @@ def synthetic_items(kind: str, seed: int, frames: int, every: int):
     for k, frame in enumerate(scene.frames()):
         if k % every:
             continue
-        gray = cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY)
         if kind == "uav":
             boxes, ignore = detection_truth(frame.ground_truth)   # hidden or mostly hidden vehicles ignored
         else:
             lo, hi = frame.quad.min(axis=0), frame.quad.max(axis=0)
             boxes, ignore = np.array([[lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]]]), np.zeros(1, bool)
-        out.append((gray, boxes, ignore))
+        out.append((frame.image, boxes, ignore))
     return out
 
 
@@ -359,9 +359,9 @@ def setup_detector(setup: str) -> Detector:
 def evaluate_synthetic(det: Detector, items) -> dict:
     acc = DetectionAccumulator()
     latencies = []
-    for gray, boxes, ignore in items:
+    for image, boxes, ignore in items:
         started = time.perf_counter()
-        table = det.detect(gray)
+        table = det.detect(image)
         latencies.append(time.perf_counter() - started)
         acc.add_frame(np.column_stack([table["x"], table["y"], table["w"], table["h"]]), table["score"], boxes, ignore)
     summary = {k: v for k, v in acc.summary().items() if not k.startswith("pr_")}

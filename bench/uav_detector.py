@@ -15,9 +15,19 @@
   counts the ground truth (every vehicle at least 30 % visible, border-cut ones included). Pooled over
   all frames, and per seed the mean and the worst (seeds with at least 10 counted vehicles: at this
   camera height a seed's frames may show only a few).
+* **Group confidence** (issue 12's "calibrated last-stage threshold"): a detection is a group of windows
+  that pass the cascade; the set-up's confidence is the number of windows in it (``min_neighbors``). Beside
+  it, from the same windows and groups: the members' last-stage margins above ``window_margin`` summed
+  (OpenCV's level weights, a sum of the final stage's boosted sums over its threshold) and the best member's
+  margin, and the set-up's colour verifier (``multi_target_tracker/verifier.py``: colour of the group's box and
+  its cascade evidence; groups of at least ``VERIFIER_MIN_WINDOWS`` windows compared). Each confidence's
+  threshold is chosen on the tuning seeds (``UAV_TUNING_SEEDS``: best detection
+  minus false alarms, pooled) and applied unchanged to the evaluation seeds; also each one's AP and its
+  detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
   side by side in this run: the set-up (its size range from the known altitude) against the same
-  model scanning every window size that fits the frame, the previous heading-aligned set-up (``PREVIOUS``),
+  model scanning every window size that fits the frame, the same cascade without the colour verifier
+  (``CASCADE_ONLY``, the set-up before it), the previous heading-aligned set-up (``PREVIOUS``),
   the upright set-up before it at this altitude (upright 3:2 model, 0 and 90 degrees only: ``UPRIGHT``) and
   the former set-up (21x14 model at the default altitude, windows from 14 px).
 
@@ -33,18 +43,20 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.special import expit
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
 from aircraft_docking_tracker.config import from_mapping, package_config_dir  # noqa: E402
-from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
+from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, detection_summary  # noqa: E402
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
-    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UavScene, UavSceneConfig, detection_truth)
-from multi_target_tracker.detector import Detector, DetectorConfig  # noqa: E402
+    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
+from multi_target_tracker.detector import Detector, DetectorConfig, group_stats, suppress_contained  # noqa: E402
+from multi_target_tracker.verifier import colour_features, group_features  # noqa: E402
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
 
 SETUP = "uav_camera.yaml"
@@ -55,9 +67,11 @@ FORMER = {"model": "uav_vehicles_fused.json", "window_margin": 1.5, "min_neighbo
 # and transposed only; its operating point as it was chosen on the tuning seeds
 # the previous heading-aligned set-up (model uav_vehicles_heading.json: positives jittered for a stride-4 scan,
 # negatives mined in the upright and transposed views only; its operating point as chosen on the tuning seeds)
-PREVIOUS = {"model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
+PREVIOUS = {"verifier": "", "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
             "stride": 8, "min_neighbors": 8, "window_margin": 1.0, "group_iou": 0.3, "containment": 0.4,
             "box_scale": 0.9}
+# the set-up before the colour verifier: the cascade's window count alone, its operating point (tuning seeds)
+CASCADE_ONLY = {"verifier": "", "min_neighbors": 8}
 UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
            "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 HEIGHTS = (1.0, 2.0, 2.5, 3.0, 4.0)
@@ -73,7 +87,7 @@ def eval_seeds(quick: bool) -> list[tuple[int, int]]:
 
 
 def frames_of(seed: int, difficulty: int, ground_resolution: float, frames: int = 80, every: int = 4):
-    """``(gray, boxes, ignore (>= 70 % visible counted), ignore as the MOT scoring does)`` every ``every``-th frame."""
+    """``(bgr, boxes, ignore (>= 70 % visible counted), ignore as the MOT scoring does)`` every ``every``-th frame."""
     scene = UavScene(UavSceneConfig(frames=frames, fps=10.0, difficulty=difficulty,
                                     ground_resolution=ground_resolution), seed=seed)
     out = []
@@ -81,13 +95,13 @@ def frames_of(seed: int, difficulty: int, ground_resolution: float, frames: int 
         if k % every == every // 2:
             boxes, ignore = detection_truth(frame.ground_truth)
             _, ignore_mot = detection_truth(frame.ground_truth, scene.config.hidden_below)
-            out.append((cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY), boxes, ignore, ignore_mot))
+            out.append((frame.image, boxes, ignore, ignore_mot))
     return out
 
 
 def short_sides(items) -> np.ndarray:
     """Shorter box sides of the counted, uncut vehicles."""
-    sides = [np.minimum(b[:, 2], b[:, 3])[~ig & ~truncated(b, g.shape[::-1])] for g, b, ig, _ in items]
+    sides = [np.minimum(b[:, 2], b[:, 3])[~ig & ~truncated(b, g.shape[1::-1])] for g, b, ig, _ in items]
     return np.concatenate(sides) if sides else np.zeros(0)
 
 
@@ -100,9 +114,9 @@ def setup_detector() -> Detector:
 
 def run(det: Detector, items) -> dict:
     acc, acc_mot, latencies = DetectionAccumulator(), DetectionAccumulator(), []
-    for gray, boxes, ignore, ignore_mot in items:
+    for image, boxes, ignore, ignore_mot in items:
         started = time.perf_counter()
-        table = det.detect(gray)
+        table = det.detect(image)
         latencies.append(time.perf_counter() - started)
         found = np.column_stack([table["x"], table["y"], table["w"], table["h"]])
         acc.add_frame(found, table["score"], boxes, ignore)
@@ -115,6 +129,77 @@ def run(det: Detector, items) -> dict:
             "mot_counting": {"detection_rate": m["detection_rate"], "false_alarm_rate": m["false_alarm_rate"],
                              "ground_truth": m["ground_truth"]},
             "fps": fps(latencies), **latency_percentiles(latencies)}
+
+
+TUNING = [(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] + [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)]
+CONFIDENCES = {"count": "windows in the group + logistic of the best margin (the set-up's score; threshold: "
+                        "min_neighbors)",
+               "margin_sum": "members' last-stage margins above window_margin, summed (level weights)",
+               "best_margin": "best member's last-stage margin",
+               "verifier": "colour verifier's log odds (the set-up's verifier; any min_neighbors >= 3)"}
+VERIFIER_MIN_WINDOWS = 3     # groups compared: those the verifier was trained on (tools/train_uav_verifier.py)
+
+
+def group_confidences(det: Detector, image: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The set-up's groups of one frame (every group of at least ``VERIFIER_MIN_WINDOWS`` windows; boxes as
+    ``detect`` scales them) and each confidence of :data:`CONFIDENCES` per group."""
+    cfg = det.config
+    group_boxes, counts, margin_sums, best = group_stats(*det.raw(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)),
+                                                         cfg.group_iou, cfg.window_margin)
+    big = counts >= VERIFIER_MIN_WINDOWS
+    group_boxes, counts, margin_sums, best = group_boxes[big], counts[big], margin_sums[big], best[big]
+    confidences = {"count": counts + expit(best), "margin_sum": margin_sums, "best_margin": best}
+    if det.verifier is not None:
+        confidences["verifier"] = det.verifier.logit(np.hstack([colour_features(image, group_boxes),
+                                                                group_features(counts, margin_sums, best)]))
+    k = cfg.box_scale
+    return np.column_stack([group_boxes[:, :2] + (1 - k) * group_boxes[:, 2:] / 2, group_boxes[:, 2:] * k]), confidences
+
+
+def confidence_runs(det: Detector, seeds: list[tuple[int, int]]) -> dict:
+    """Per confidence, per seed: the ``(scores, true-positive flags, counted vehicles)`` of every group
+    after containment suppression ordered by that confidence (a threshold keeps a prefix of them)."""
+    out = {}
+    for seed, difficulty in seeds:
+        accs = {}
+        for gray, boxes, ignore, _ in frames_of(seed, difficulty, UAV_SETUP_GROUND_RESOLUTION):
+            group_boxes, confidences = group_confidences(det, gray)
+            for name, conf in confidences.items():
+                keep = suppress_contained(group_boxes, conf, det.config.containment)
+                accs.setdefault(name, DetectionAccumulator()).add_frame(group_boxes[keep], conf[keep], boxes, ignore)
+        for name, acc in accs.items():
+            out.setdefault(name, []).append((np.asarray(acc.scores), np.asarray(acc.is_tp, bool), acc.n_gt))
+    return out
+
+
+def _rates(runs, threshold: float) -> tuple[float, float]:
+    tp = sum(int(t[s >= threshold].sum()) for s, t, _ in runs)
+    n_det = sum(int((s >= threshold).sum()) for s, _, _ in runs)
+    return tp / max(sum(n for _, _, n in runs), 1), 1 - tp / max(n_det, 1)
+
+
+def confidence_summary(tuning: dict, held_out: dict) -> dict:
+    """Threshold of each confidence chosen on the tuning runs, its rates on the held-out runs (pooled, per seed)."""
+    out = {}
+    for name in (n for n in CONFIDENCES if n in tuning):
+        thresholds = np.unique(np.concatenate([s for s, _, _ in tuning[name]]))
+        tuned = [(d - f, t, d, f) for t in thresholds for d, f in [_rates(tuning[name], t)]]
+        _, threshold, tune_det, tune_fa = max(tuned)
+        det_, fa = _rates(held_out[name], threshold)
+        per_seed = [_rates([r], threshold) for r in held_out[name] if r[2] >= MIN_SEED_BOXES]
+        scores = np.concatenate([s for s, _, _ in held_out[name]])
+        is_tp = np.concatenate([t for _, t, _ in held_out[name]])
+        curve = detection_summary(scores, is_tp, sum(n for _, _, n in held_out[name]))
+        recall, precision = np.asarray(curve["pr_recall"]), np.asarray(curve["pr_precision"])
+        at = lambda cap: float(recall[1 - precision <= cap].max()) if (1 - precision <= cap).any() else 0.0  # noqa: E731
+        out[name] = {"threshold": float(threshold), "tuning_detection": tune_det, "tuning_false_alarms": tune_fa,
+                     "detection": det_, "false_alarms": fa,
+                     "detection_worst": min(d for d, _ in per_seed), "false_alarms_worst": max(f for _, f in per_seed),
+                     "detection_mean": float(np.mean([d for d, _ in per_seed])),
+                     "false_alarms_mean": float(np.mean([f for _, f in per_seed])),
+                     "average_precision": curve["average_precision"], "detection_at_fa_015": at(0.15),
+                     "detection_at_fa_030": at(0.30)}
+    return out
 
 
 def spread(per_seed: list[dict]) -> dict:
@@ -144,19 +229,20 @@ def main() -> int:
     cv2.setNumThreads(1)
     seeds = eval_seeds(args.quick)
     det = setup_detector()
-    det.detect(np.zeros((480, 640), np.uint8))       # compile the scan before timing
+    det.detect(np.zeros((480, 640, 3), np.uint8))    # compile the scan before timing
     # no altitude prior: every window size from the model's own window up to the frame
     full = Detector(from_mapping(DetectorConfig, {**_fields(det.config), "min_size": float(det.window[1]),
                                                   "max_size": 1e4}))
     former = Detector(DetectorConfig(**FORMER))
     upright = Detector(DetectorConfig(**UPRIGHT))
     previous = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **PREVIOUS}))
+    cascade_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **CASCADE_ONLY}))
     other = (Detector(from_mapping(DetectorConfig, {**_fields(det.config), "model": args.other_seed_model}))
              if args.other_seed_model else None)
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
-               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "previous": [], "upright": [], "former": [], "other_seed": [],
+               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "cascade_only": [], "previous": [], "upright": [], "former": [], "other_seed": [],
                "other_seed_model": args.other_seed_model}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
@@ -168,6 +254,7 @@ def main() -> int:
         results["seeds"].append({"seed": seed, "difficulty": difficulty})
         results["setup_results"].append(run(det, items))
         results["full_pyramid"].append(run(full, items[::4]))      # speed and false alarms without the size prior
+        results["cascade_only"].append(run(cascade_only, items))
         results["upright"].append(run(upright, items))
         results["previous"].append(run(previous, items))
         if other is not None:
@@ -177,9 +264,10 @@ def main() -> int:
         r = results["setup_results"][-1]
         print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
               f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
-    for key in ("setup_results", "full_pyramid", "previous", "upright", "former", "other_seed"):
+    for key in ("setup_results", "full_pyramid", "cascade_only", "previous", "upright", "former", "other_seed"):
         if results[key]:
             results[key + "_summary"] = spread(results[key])
+    results["confidences"] = confidence_summary(confidence_runs(det, TUNING), confidence_runs(det, seeds))
     results["setup_results_difficulty_1_summary"] = spread(
         [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
     (HERE / "results").mkdir(exist_ok=True)
@@ -229,10 +317,23 @@ def markdown(results: dict) -> str:
              line("same model, every window size (no altitude prior; every 4th frame)", full),
              *([line(f"same recipe, another training seed ({Path(results['other_seed_model']).name})",
                      results["other_seed_summary"])] if "other_seed_summary" in results else []),
+             line("same cascade without the colour verifier (window count, min_neighbors 8: the set-up before it)",
+                  results["cascade_only_summary"]),
              line("previous set-up: uav_vehicles_heading.json (stride-4 jitter, upright-view mining), its operating "
                   "point", previous),
              line("previous set-up: upright 3:2 model uav_vehicles_low.json, 0/90 degrees only", upright),
              line(f"former set-up (default altitude, 21x14 model, windows from 14 px; every 2nd frame)", former),
+             "", "Group confidence (threshold chosen on the 18 tuning seeds, best detection minus false alarms pooled, "
+             "then applied to the evaluation seeds above; AP and detection at a false-alarm cap from the evaluation "
+             "seeds' own PR curve):", "",
+             "| confidence | threshold | tuning: detection / false alarms | evaluation pooled: detection / false alarms | "
+             "per seed mean: detection / false alarms | worst seed: detection / false alarms | AP | detection at "
+             "false alarms <= 0.15 / 0.30 |", "|---|---|---|---|---|---|---|---|",
+             *[f"| {CONFIDENCES[n]} | {c['threshold']:.2f} | {c['tuning_detection']:.3f} / {c['tuning_false_alarms']:.3f} | "
+               f"{c['detection']:.3f} / {c['false_alarms']:.3f} | {c['detection_mean']:.3f} / {c['false_alarms_mean']:.3f} | "
+               f"{c['detection_worst']:.3f} / {c['false_alarms_worst']:.3f} | {c['average_precision']:.3f} | "
+               f"{c['detection_at_fa_015']:.3f} / {c['detection_at_fa_030']:.3f} |"
+               for n, c in results["confidences"].items()],
              "", f"Targets (issue 12): detection >= {TARGET_DETECTION} at false alarms <= {TARGET_FALSE_ALARMS}; "
              f">= {TARGET_FPS:g} frames/s at 640x480 on one core."]
     return "\n".join(rows) + "\n"

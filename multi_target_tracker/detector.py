@@ -50,6 +50,7 @@ from aircraft_docking_tracker.geometry import box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
+from multi_target_tracker.verifier import Verifier, VerifierError, colour_features, group_features
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_MODEL = "drone_vehicles_fused.json"
@@ -91,6 +92,12 @@ class DetectorConfig:
     box_scale: float = param(1.0, "each detection box is scaled about its centre by this factor (a cascade fires "
                              "most on windows a little inside the object; 1: the grouped windows as they are; the "
                              "UAV set-up's is chosen on tuning scenes)", low=0.25, high=4.0)
+    verifier: str = param("", "colour verifier of the groups (JSON model; a bare name is looked up in "
+                          "multi_target_tracker/models; empty: none): groups of at least min_neighbors windows are "
+                          "kept when its log odds reach verifier_threshold, the detection score is then its "
+                          "probability; needs colour images and the cascade backend (the UAV set-up's)")
+    verifier_threshold: float = param(0.0, "log odds a group needs from the verifier to be a detection (chosen on "
+                                      "tuning scenes)", low=-50.0, high=50.0)
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -114,6 +121,8 @@ class DetectorConfig:
             raise ConfigError(f"angles must be 1-8 numbers in [-180, 180] degrees, got {angles}", ("angles",))
         if self.backend == "opencv" and any(a != 0 for a in angles):
             raise ConfigError("angles other than 0 need the cascade backend", ("angles", "backend"))
+        if self.verifier and self.backend != "cascade":
+            raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
         if self.min_size > 0 and self.max_size > 0 and self.min_size > self.max_size:
             raise ConfigError(f"min_size={self.min_size} must not exceed max_size={self.max_size}",
                               ("min_size", "max_size"))
@@ -122,6 +131,10 @@ class DetectorConfig:
         except (DetectorError, CascadeError) as exc:
             raise ConfigError(f"model {self.model!r} ({self.backend} backend): {exc}",
                               ("model", "backend", "max_model_stumps", "min_model_window")) from None
+        try:
+            load_verifier(self)
+        except (DetectorError, VerifierError) as exc:
+            raise ConfigError(f"verifier {self.verifier!r}: {exc}", ("verifier",)) from None
 
 
 def resolve_model(name: str) -> Path:
@@ -168,6 +181,13 @@ def load_model(cfg: DetectorConfig):
             _MODEL_CACHE.pop(next(iter(_MODEL_CACHE)))
         _MODEL_CACHE[key] = cascade
     return _MODEL_CACHE[key]
+
+
+def load_verifier(cfg: DetectorConfig) -> Verifier | None:
+    """The colour verifier of ``cfg`` (None when ``cfg.verifier`` is empty)."""
+    if not cfg.verifier:
+        return None
+    return Verifier.load(resolve_model(cfg.verifier))
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -336,6 +356,34 @@ def _group_labels(boxes, group_iou):
     return label, seeds[:groups]
 
 
+def group_members(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3):
+    """The groups of :func:`group_windows` before any is dropped: ``(boxes, margins, label, seeds)`` with the
+    windows sorted best margin first, each window's group label and each group's seed (best) window.
+    Benchmarks score other group confidences from it (e.g. the members' summed margins)."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    margins = np.asarray(margins, np.float64).reshape(-1)
+    order = np.argsort(-margins, kind="stable")
+    boxes, margins = np.ascontiguousarray(boxes[order]), margins[order]
+    if len(boxes) == 0:
+        return boxes, margins, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    label, seeds = _group_labels(boxes, float(group_iou))
+    return boxes, margins, label, seeds
+
+
+def group_stats(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, margin_floor: float = 0.0):
+    """Every group of :func:`group_members` (none dropped): ``(boxes, counts, margin_sums, best_margins)`` with the
+    mean box of each group, its number of windows, its members' margins above ``margin_floor`` summed (OpenCV's
+    level weights) and its best member's margin."""
+    boxes, margins, label, seeds = group_members(boxes, margins, group_iou)
+    if len(seeds) == 0:
+        return np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    counts = np.bincount(label, minlength=len(seeds))
+    sums = np.zeros((len(seeds), 4))
+    np.add.at(sums, label, boxes)          # members in window order, as a per-group mean adds them
+    margin_sums = np.bincount(label, weights=margins - margin_floor, minlength=len(seeds))
+    return sums / counts[:, None], counts, margin_sums, margins[seeds]
+
+
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
                   containment: float = 0.4, max_detections: int = 500) -> tuple[np.ndarray, np.ndarray]:
     """Raw windows ``(n, 4)`` and their last-stage margins -> grouped ``(boxes, scores)``, best first.
@@ -343,21 +391,11 @@ def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     See the module docstring: mean box per group, score = windows in the group + logistic of the best
     margin, groups smaller than ``min_neighbors`` dropped, contained groups suppressed.
     """
-    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
-    margins = np.asarray(margins, np.float64).reshape(-1)
-    order = np.argsort(-margins, kind="stable")
-    boxes, margins = np.ascontiguousarray(boxes[order]), margins[order]
-    if len(boxes) == 0:
+    group_boxes, counts, _, best = group_stats(boxes, margins, group_iou)
+    big = counts >= min_neighbors
+    if not big.any():
         return np.zeros((0, 4)), np.zeros(0)
-    label, seeds = _group_labels(boxes, float(group_iou))
-    counts = np.bincount(label, minlength=len(seeds))
-    sums = np.zeros((len(seeds), 4))
-    np.add.at(sums, label, boxes)          # members in window order, as a per-group mean adds them
-    big = np.flatnonzero(counts >= min_neighbors)
-    if len(big) == 0:
-        return np.zeros((0, 4)), np.zeros(0)
-    group_boxes = sums[big] / counts[big, None]
-    group_scores = counts[big] + expit(margins[seeds[big]])
+    group_boxes, group_scores = group_boxes[big], counts[big] + expit(best[big])
     keep = suppress_contained(group_boxes, group_scores, containment, max_detections)
     return group_boxes[keep], group_scores[keep]
 
@@ -383,6 +421,15 @@ class Detector:
         self.both_orientations = orientation == "both"
         self.angles = sorted({float(a) for a in cfg.angles}) if self.cascade is not None else [0.0]
         self.pool = ThreadPoolExecutor(cfg.threads, "detector") if cfg.threads > 1 else None
+        try:
+            self.verifier = load_verifier(cfg) if self.cascade is not None else None
+        except VerifierError as exc:
+            raise DetectorError(str(exc)) from None
+
+    @property
+    def needs_colour(self) -> bool:
+        """Whether :meth:`detect` needs a BGR image (a colour verifier is configured)."""
+        return self.verifier is not None
 
     def raw(self, gray: np.ndarray, last_stage_margin: float | None = None):
         """Ungrouped windows ``(boxes, scores)`` in ``gray``'s pixels, both orientations if configured."""
@@ -413,9 +460,11 @@ class Detector:
         return np.vstack(all_boxes), np.concatenate(all_scores)
 
     def detect(self, image: np.ndarray, last_stage_margin: float | None = None) -> np.ndarray:
-        """Detections in ``image`` (grey or BGR uint8), best score first."""
+        """Detections in ``image`` (grey or BGR uint8; BGR with a verifier), best score first."""
         cfg = self.config
         gray = to_gray(image)
+        if self.verifier is not None and not (image.ndim == 3 and image.shape[2] == 3):
+            raise DetectorError(f"the colour verifier needs a BGR image, got shape {image.shape}")
         x0, y0 = 0, 0
         rx, ry, rw, rh = (int(v) for v in cfg.roi)
         if rw > 0 and rh > 0:
@@ -427,7 +476,10 @@ class Detector:
             boxes, scores = self.raw(gray, last_stage_margin)
         except FeatureError as exc:
             raise DetectorError(str(exc)) from exc
-        if self.cascade is not None:
+        if self.verifier is not None:
+            boxes, scores = self._verified(image[y0:y0 + gray.shape[0], x0:x0 + gray.shape[1]], boxes, scores,
+                                           cfg.window_margin if last_stage_margin is None else last_stage_margin)
+        elif self.cascade is not None:
             boxes, scores = group_windows(boxes, scores, cfg.group_iou, cfg.min_neighbors, cfg.containment,
                                           cfg.max_detections)
         else:  # OpenCV grouped already (minNeighbors); the two orientations only need merging
@@ -439,3 +491,16 @@ class Detector:
         out["w"], out["h"] = boxes[:, 2] * k, boxes[:, 3] * k
         out["score"], out["class_id"] = scores, cfg.class_id
         return out
+
+    def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """Groups of at least ``min_neighbors`` windows that the colour verifier accepts, scored by its probability."""
+        cfg = self.config
+        group_boxes, counts, margin_sums, best = group_stats(boxes, margins, cfg.group_iou, margin_floor)
+        big = counts >= cfg.min_neighbors
+        group_boxes, counts, margin_sums, best = group_boxes[big], counts[big], margin_sums[big], best[big]
+        logit = self.verifier.logit(np.hstack([colour_features(bgr, group_boxes),
+                                               group_features(counts, margin_sums, best)]))
+        accepted = logit >= cfg.verifier_threshold
+        group_boxes, scores = group_boxes[accepted], expit(logit[accepted])
+        keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
+        return group_boxes[keep], scores[keep]

@@ -96,9 +96,10 @@ class DetectorProcessor(MessageProcessor):
             self.passed_over += 1
             return []
         limit = self.node.max_image_pixels
-        bgr = to_bgr8(msg, limit) if self.node.annotate_image else None
-        gray = to_mono8(msg, limit) if bgr is None else _gray(bgr)
-        table = self.detector.detect(gray)
+        colour = self.node.annotate_image or self.detector.needs_colour      # the colour verifier reads BGR
+        bgr = to_bgr8(msg, limit) if colour else None
+        image = bgr if self.detector.needs_colour else to_mono8(msg, limit) if bgr is None else _gray(bgr)
+        table = self.detector.detect(image)
         self.last_count = len(table)
         out = [("detections", table_to_cloud(table, msg.header)),
                ("detections/markers", boxes_to_markers(table, msg.header, "detections")),

@@ -132,3 +132,27 @@ def test_detect_tool_over_folder_and_bag(model, scenes, tmp_path):
     assert sum(len(t) for t in tables) == len(lines)
     assert hits(tables[1], scenes[1][1]) >= 2
     assert detect.main([str(tmp_path / "missing_dir_or_bag")] + args) == 2
+
+
+def test_a_detector_with_a_colour_verifier_gets_colour_from_any_encoding(model, scenes, tmp_path):
+    """The node hands BGR to a detector whose verifier needs it (mono8 input converted); a verifier that
+    accepts every group keeps the cascade's groups, scored by its probability."""
+    from multi_target_tracker.verifier import FEATURES, Verifier  # noqa: PLC0415
+
+    path = tmp_path / "accept_all.json"
+    n = len(FEATURES)
+    Verifier(np.zeros(n), np.ones(n), np.zeros(n), 5.0).save(path)
+    plain = DetectorProcessor(DetectorConfig(model=model, **TINY_DETECTOR))
+    verified = DetectorProcessor(DetectorConfig(model=model, verifier=str(path), **TINY_DETECTOR))
+    stats = ProcessingStats()
+    image = scenes[0][0]
+    tables = []
+    for proc, encoding, pixels in ((plain, "mono8", image), (verified, "mono8", image),
+                                   (verified, "bgr8", np.dstack([image] * 3))):
+        out = process_guarded(proc, "image", numpy_to_image(pixels, encoding, header(0)), stats)
+        tables.append(cloud_to_table(out[0][1], DETECTION_DTYPE))
+    assert stats.rejected_total == 0 and len(tables[0]) >= 2
+    key = lambda t: np.sort(np.round(np.column_stack([t["x"], t["y"]]), 3), axis=0)  # noqa: E731
+    for table in tables[1:]:
+        assert np.allclose(key(table), key(tables[0]))
+        assert np.allclose(table["score"], 1 / (1 + np.exp(-5.0)))

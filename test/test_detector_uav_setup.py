@@ -6,7 +6,8 @@ with margin: bench/uav_detector.py measures the set-up on more seeds (see its ta
 """
 from __future__ import annotations
 
-import cv2
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -20,12 +21,14 @@ from multi_target_tracker.cascade import Cascade
 from multi_target_tracker.detector import Detector, DetectorConfig, resolve_model
 
 SETUP = package_config_dir() / "uav_camera.yaml"
-# pooled over seeds 3900-3903 the set-up measured detection 0.49 at false alarms 0.38 (3904-3907: 0.36 / 0.42,
-# 3908-3911: 0.43 / 0.49; the previous heading-aligned model 0.52 / 0.48, 0.47 / 0.57, 0.57 / 0.58; the upright
-# model: 0.33 / 0.74, 0.28 / 0.74, 0.48 / 0.64): still far from issue 12's 0.85 / 0.15; these bounds keep a
-# margin under what the four seeds below measure
-MIN_DETECTION, MAX_FALSE_ALARMS = 0.35, 0.7
+# pooled over seeds 3900-3903 (every 8th frame) the set-up with its colour verifier measured detection 0.52 at
+# false alarms 0.19, the same cascade without it (window count, min_neighbors 8) 0.49 / 0.38 (before the verifier
+# the set-up measured 0.49 / 0.38 at every 4th frame, the upright model 0.33 / 0.74): still below issue 12's
+# 0.85 / 0.15; these bounds keep a margin under what the four seeds below measure
+MIN_DETECTION, MAX_FALSE_ALARMS = 0.35, 0.35
 # the previous set-up (upright 3:2 windows, vehicles at any heading in them; bench/uav_detector.py UPRIGHT)
+# the same cascade without the colour verifier (the set-up before it; bench/uav_detector.py CASCADE_ONLY)
+CASCADE_ONLY = {"verifier": "", "min_neighbors": 8}
 UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
            "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 
@@ -62,7 +65,7 @@ def _counts(detector, seed: int) -> tuple[int, int, int]:
     acc = DetectionAccumulator()
     for k, frame in enumerate(UavScene(config, seed=seed).frames()):
         if k % 8 == 4:
-            table = detector.detect(cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY))
+            table = detector.detect(frame.image)          # BGR: the set-up's colour verifier reads it
             boxes, ignore = detection_truth(frame.ground_truth)
             acc.add_frame(np.column_stack([table["x"], table["y"], table["w"], table["h"]]), table["score"],
                           boxes, ignore)
@@ -84,3 +87,16 @@ def test_uav_setup_detects_the_vehicles_of_held_out_scenes(detector):
     u_vehicles, u_detections, u_true = upright.sum(axis=0)
     assert true / vehicles >= u_true / u_vehicles + 0.08, (counts, upright)
     assert 1 - true / max(detections, 1) <= 1 - u_true / max(u_detections, 1) - 0.1, (counts, upright)
+
+
+def test_the_colour_verifier_halves_the_cascades_false_alarms_on_held_out_scenes(detector):
+    """Side by side on the same held-out scenes: the verifier removes false groups (canopy, smoke) the window
+    count cannot tell from vehicles, without losing detections (measured 0.19 against 0.38 false alarms,
+    0.52 against 0.49 detection)."""
+    cascade_only = Detector(dataclasses.replace(detector.config, **CASCADE_ONLY))
+    assert detector.needs_colour and not cascade_only.needs_colour
+    seeds = UAV_EVAL_SEEDS[900:904]
+    vehicles, detections, true = np.array([_counts(detector, s) for s in seeds]).sum(axis=0)
+    c_vehicles, c_detections, c_true = np.array([_counts(cascade_only, s) for s in seeds]).sum(axis=0)
+    assert 1 - true / max(detections, 1) <= 1 - c_true / max(c_detections, 1) - 0.1
+    assert true / vehicles >= c_true / c_vehicles - 0.05

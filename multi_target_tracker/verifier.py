@@ -1,0 +1,141 @@
+"""Colour verifier of the cascade's groups (pure: numpy, scipy, OpenCV): the UAV set-up's second stage.
+
+The cascade looks at grey texture only (seed 003's LBP and contour features). On the UAV scenes its
+window count does not tell a vehicle from the tree canopy, smoke or a road patch that passes it as
+often (bench/uav_detector.py: the count, the summed last-stage margins and the best margin give
+about the same precision-recall curve). A vehicle's paint does: a second stage scores each group
+from its colour and its cascade evidence with a logistic regression,
+
+    logit = w . (f - mean) / std + b
+
+with ``f`` = the colour statistics of the inner half of the group's box (mean and standard deviation
+of B, G, R; the saturation-weighted hue as cos / sin; mean saturation; standard deviation of the value)
+and the group's log window count, log(1 + summed margins above ``window_margin``) and best margin.
+It is trained by ``tools/train_uav_verifier.py`` on the training scenes' groups (labelled by the
+ground truth), its threshold chosen on the tuning scenes. The model file is JSON (never pickle).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.optimize import minimize
+
+VERIFIER_FORMAT = "aircraft_docking_tracker/group-verifier"
+VERIFIER_VERSION = 1
+COLOUR_FEATURES = ("mean_b", "mean_g", "mean_r", "std_b", "std_g", "std_r", "hue_cos", "hue_sin",
+                   "mean_saturation", "std_value")
+GROUP_FEATURES = ("log_count", "log_margin_sum", "best_margin")
+FEATURES = COLOUR_FEATURES + GROUP_FEATURES
+
+
+class VerifierError(ValueError):
+    """A verifier model file or input that cannot be used."""
+
+
+def colour_features(bgr: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """``(n, 10)`` colour statistics (:data:`COLOUR_FEATURES`, scaled to about 0..1) of the inner half of
+    each box (x, y, w, h; clipped to the image) of a BGR uint8 image."""
+    if bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8:
+        raise VerifierError(f"the colour verifier needs a BGR uint8 image, got {bgr.dtype} {bgr.shape}")
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    height, width = bgr.shape[:2]
+    out = np.zeros((len(boxes), len(COLOUR_FEATURES)))
+    for k, (x, y, w, h) in enumerate(boxes):
+        x0, x1 = int(np.clip(x + w / 4, 0, width - 1)), int(np.clip(x + 3 * w / 4, 0, width - 1))
+        y0, y1 = int(np.clip(y + h / 4, 0, height - 1)), int(np.clip(y + 3 * h / 4, 0, height - 1))
+        inner = bgr[y0:max(y1, y0 + 1), x0:max(x1, x0 + 1)]
+        pixels = inner.reshape(-1, 3).astype(np.float64)
+        hsv = cv2.cvtColor(inner, cv2.COLOR_BGR2HSV).reshape(-1, 3).astype(np.float64)
+        hue = hsv[:, 0] * (np.pi / 90.0)            # OpenCV's 8-bit hue is 0..179 for 0..358 degrees
+        out[k] = np.concatenate([pixels.mean(axis=0) / 255, pixels.std(axis=0) / 255,
+                                 [np.mean(np.cos(hue) * hsv[:, 1]) / 255, np.mean(np.sin(hue) * hsv[:, 1]) / 255,
+                                  hsv[:, 1].mean() / 255, hsv[:, 2].std() / 255]])
+    return out
+
+
+def group_features(counts: np.ndarray, margin_sums: np.ndarray, best_margins: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` cascade evidence of each group (:data:`GROUP_FEATURES`)."""
+    return np.column_stack([np.log(np.maximum(np.asarray(counts, np.float64), 1.0)),
+                            np.log1p(np.maximum(np.asarray(margin_sums, np.float64), 0.0)),
+                            np.asarray(best_margins, np.float64)]).reshape(-1, len(GROUP_FEATURES))
+
+
+@dataclass
+class Verifier:
+    """A logistic regression over :data:`FEATURES`: standardisation, weights, bias."""
+
+    mean: np.ndarray
+    std: np.ndarray
+    weights: np.ndarray
+    bias: float
+    info: dict = field(default_factory=dict)
+
+    def logit(self, features: np.ndarray) -> np.ndarray:
+        """Log odds that each row of ``features`` (n x len(FEATURES)) is a vehicle."""
+        features = np.asarray(features, np.float64).reshape(-1, len(FEATURES))
+        return ((features - self.mean) / self.std) @ self.weights + self.bias
+
+    def to_dict(self) -> dict:
+        return {"format": VERIFIER_FORMAT, "version": VERIFIER_VERSION, "features": list(FEATURES),
+                "mean": self.mean.tolist(), "std": self.std.tolist(), "weights": self.weights.tolist(),
+                "bias": float(self.bias), "info": self.info}
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Verifier":
+        """A verifier from its JSON form; refuses another format, other features, non-finite numbers."""
+        if not isinstance(d, dict) or d.get("format") != VERIFIER_FORMAT:
+            raise VerifierError(f"not a {VERIFIER_FORMAT} model")
+        if d.get("version") != VERIFIER_VERSION:
+            raise VerifierError(f"verifier version {d.get('version')} unsupported (expected {VERIFIER_VERSION})")
+        if list(d.get("features", ())) != list(FEATURES):
+            raise VerifierError(f"verifier features {d.get('features')} are not {list(FEATURES)}")
+        try:
+            arrays = [np.asarray(d[k], np.float64).reshape(-1) for k in ("mean", "std", "weights")]
+            bias = float(d["bias"])
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
+            raise VerifierError(f"malformed verifier ({type(exc).__name__}: {exc})") from None
+        if any(len(a) != len(FEATURES) for a in arrays):
+            raise VerifierError(f"mean, std and weights need {len(FEATURES)} values each")
+        if not all(np.isfinite(a).all() for a in arrays) or not math.isfinite(bias) or (arrays[1] <= 0).any():
+            raise VerifierError("the verifier holds a non-finite number or a std <= 0")
+        return cls(*arrays, bias, dict(d.get("info", {})))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Verifier":
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+            raise VerifierError(f"cannot read verifier {path}: {exc}") from exc
+        try:
+            return cls.from_dict(data)
+        except VerifierError as exc:
+            raise VerifierError(f"{path}: {exc}") from None
+
+
+def fit_verifier(features: np.ndarray, labels: np.ndarray, l2: float = 1e-3) -> Verifier:
+    """Logistic regression (L-BFGS, L2 penalty ``l2`` on the standardised weights, the two classes weighted
+    equally) of ``labels`` (1 vehicle, 0 not) on ``features`` (n x len(FEATURES))."""
+    x = np.asarray(features, np.float64).reshape(-1, len(FEATURES))
+    y = np.asarray(labels, bool).reshape(-1)
+    if len(x) != len(y) or y.all() or not y.any():
+        raise VerifierError("fitting needs as many labels as rows and both classes")
+    mean, std = x.mean(axis=0), x.std(axis=0) + 1e-6
+    z = np.column_stack([(x - mean) / std, np.ones(len(x))])
+    sign = np.where(y, 1.0, -1.0)
+    weight = np.where(y, 0.5 / y.mean(), 0.5 / (1 - y.mean())) / len(y)
+
+    def loss(w):
+        margin = sign * (z @ w)
+        grad = -(weight * sign * np.exp(-np.logaddexp(0.0, margin))) @ z + l2 * np.append(w[:-1], 0.0)
+        return float(weight @ np.logaddexp(0.0, -margin) + 0.5 * l2 * w[:-1] @ w[:-1]), grad
+
+    w = minimize(loss, np.zeros(z.shape[1]), jac=True, method="L-BFGS-B", options={"maxiter": 1000}).x
+    return Verifier(mean, std, w[:-1], float(w[-1]), {"samples": int(len(y)), "positives": int(y.sum()), "l2": l2})

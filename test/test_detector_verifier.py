@@ -1,0 +1,92 @@
+"""The colour verifier of the cascade's groups (multi_target_tracker/verifier.py) and the group statistics."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker.config import ConfigError, validate
+from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_stats, group_windows
+from multi_target_tracker.verifier import (
+    FEATURES, Verifier, VerifierError, colour_features, fit_verifier, group_features)
+
+
+def test_group_stats_counts_and_sums_the_windows_of_each_group():
+    rng = np.random.default_rng(0)
+    cluster = np.array([100, 100, 40, 20]) + np.column_stack([rng.integers(-2, 3, (6, 2)), np.zeros((6, 2))])
+    lone = np.array([[400, 300, 40, 20]])
+    boxes = np.vstack([cluster, lone]).astype(float)
+    margins = np.array([1.0, 2.0, 0.5, 1.5, 1.2, 0.8, 3.0])
+    group_boxes, counts, sums, best = group_stats(boxes, margins, 0.3, margin_floor=0.5)
+    assert sorted(counts.tolist()) == [1, 6]
+    big = int(np.argmax(counts))
+    assert sums[big] == pytest.approx((margins[:6] - 0.5).sum()) and best[big] == 2.0
+    assert sums[1 - big] == pytest.approx(2.5) and best[1 - big] == 3.0     # the lone window's own margin
+    assert np.allclose(group_boxes[big], cluster.mean(axis=0))
+    grouped, scores = group_windows(boxes, margins, 0.3, min_neighbors=2, containment=1.0)
+    assert len(grouped) == 1 and np.allclose(grouped[0], group_boxes[big]) and 6 < scores[0] < 7
+
+
+def test_colour_features_tell_a_painted_box_from_canopy_and_refuse_grey_images():
+    image = np.zeros((100, 200, 3), np.uint8)
+    image[:, :100] = (40, 120, 50)          # green canopy (BGR)
+    image[:, 100:] = (40, 40, 200)          # a red car
+    f = colour_features(image, np.array([[10, 10, 60, 60], [120, 10, 60, 60]], float))
+    assert f.shape == (2, len(FEATURES) - 3)
+    assert f[0, 1] > f[0, 2] + 0.2 and f[1, 2] > f[1, 1] + 0.4           # mean green / mean red
+    assert f[0, 6] != pytest.approx(f[1, 6], abs=0.1)                     # hue differs
+    with pytest.raises(VerifierError):
+        colour_features(image[:, :, 0], np.array([[0, 0, 10, 10]], float))
+    edge = colour_features(image, np.array([[190, 90, 40, 40], [-30, -30, 20, 20]], float))   # clipped, no crash
+    assert np.isfinite(edge).all()
+
+
+def test_fit_verifier_orders_separable_groups_and_round_trips_through_json(tmp_path):
+    rng = np.random.default_rng(1)
+    n = 400
+    labels = rng.random(n) < 0.3
+    x = rng.normal(size=(n, len(FEATURES)))
+    x[:, 2] += np.where(labels, 1.5, -1.5)          # red paint on vehicles, none on the background
+    verifier = fit_verifier(x, labels)
+    logit = verifier.logit(x)
+    # with classes 3 standard deviations apart the positives rank above the negatives almost always
+    auc = (logit[labels][:, None] > logit[~labels][None, :]).mean()
+    assert auc > 0.95
+    path = tmp_path / "v.json"
+    verifier.save(path)
+    again = Verifier.load(path)
+    assert np.allclose(again.logit(x), logit)
+    with pytest.raises(VerifierError):
+        fit_verifier(x, np.ones(n, bool))             # one class only
+
+
+@pytest.mark.parametrize("change", [
+    {"format": "something else"}, {"version": 99}, {"features": ["a"]}, {"weights": [1.0]},
+    {"std": [0.0] * len(FEATURES)}, {"bias": float("nan")}, {"mean": "abc"}])
+def test_a_malformed_verifier_is_refused(tmp_path, change):
+    good = Verifier(np.zeros(len(FEATURES)), np.ones(len(FEATURES)), np.ones(len(FEATURES)), 0.0).to_dict()
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps({**good, **change}))
+    with pytest.raises(VerifierError):
+        Verifier.load(path)
+
+
+def test_group_features_are_finite_for_any_group():
+    f = group_features(np.array([1, 8, 30]), np.array([-0.5, 4.0, 40.0]), np.array([0.1, 2.0, 6.0]))
+    assert f.shape == (3, 3) and np.isfinite(f).all() and (np.diff(f[:, 0]) > 0).all()
+
+
+def test_detector_with_a_verifier_needs_colour_and_the_cascade_backend(tmp_path):
+    path = tmp_path / "v.json"
+    Verifier(np.zeros(len(FEATURES)), np.ones(len(FEATURES)), np.zeros(len(FEATURES)), 5.0).save(path)
+    det = Detector(DetectorConfig(verifier=str(path)))
+    assert det.needs_colour and not Detector(DetectorConfig()).needs_colour
+    with pytest.raises(DetectorError):
+        det.detect(np.zeros((120, 160), np.uint8))
+    table = det.detect(np.zeros((120, 160, 3), np.uint8))
+    assert len(table) == 0 or ((table["score"] > 0) & (table["score"] < 1)).all()   # probabilities
+    with pytest.raises(ConfigError, match="verifier"):
+        validate(DetectorConfig(verifier=str(tmp_path / "missing.json")))
+    with pytest.raises(ConfigError, match="verifier needs the cascade backend"):
+        validate(DetectorConfig(backend="opencv", model="x.xml", verifier=str(path)))

@@ -1,0 +1,144 @@
+"""Train the UAV set-up's colour verifier (multi_target_tracker/verifier.py) and choose its operating point.
+
+    python tools/train_uav_verifier.py [--out multi_target_tracker/models/uav_vehicles_verifier.json]
+
+1. **Training** (``UAV_TRAIN_SEEDS`` only): the set-up's cascade (config/uav_camera.yaml without a verifier)
+   on every 8th frame of training scenes of both difficulties; every group of at least ``--min-windows``
+   windows is a sample: a vehicle when its box (scaled by the set-up's ``box_scale``) overlaps a counted
+   vehicle (>= 70 % visible) by IoU >= 0.5, background when it overlaps no vehicle at all by 0.3 (the
+   groups in between, half on a vehicle or on a hidden one, are left out); logistic regression on
+   ``verifier.FEATURES``.
+2. **Operating point** (``UAV_TUNING_SEEDS`` only, every 4th frame as bench/uav_detector.py): for each
+   ``min_neighbors`` of ``--min-neighbors`` the detector with the verifier, its threshold the one of best
+   detection minus false alarms pooled over the tuning frames (vehicles < 70 % visible ignored, IoU >= 0.5);
+   the pair with the best such value is written into the model's ``info`` (copy it into
+   config/uav_camera.yaml). The evaluation seeds are not touched: bench/uav_detector.py measures them.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
+from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
+from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
+from aircraft_docking_tracker.offline import build_processor  # noqa: E402
+from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
+    UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
+from multi_target_tracker.detector import MODELS_DIR, Detector, group_stats  # noqa: E402
+from multi_target_tracker.verifier import colour_features, fit_verifier, group_features  # noqa: E402
+
+SETUP = "uav_camera.yaml"
+
+
+def scene_frames(seed: int, difficulty: int, every: int):
+    """``(bgr, boxes, ignore)`` of every ``every``-th frame of an 80-frame scene at the set-up's height."""
+    scene = UavScene(UavSceneConfig(frames=80, fps=10.0, difficulty=difficulty,
+                                    ground_resolution=UAV_SETUP_GROUND_RESOLUTION), seed=seed)
+    for k, frame in enumerate(scene.frames()):
+        if k % every == every // 2:
+            boxes, ignore = detection_truth(frame.ground_truth)
+            yield frame.image, boxes, ignore
+
+
+def cascade_detector(overrides: dict | None = None) -> Detector:
+    detector = build_processor("detector", package_config_dir() / SETUP, {"verifier": "", **(overrides or {})}).detector
+    if detector is None:
+        raise SystemExit(f"{SETUP}: the detector cannot be built")
+    return detector
+
+
+def samples(det: Detector, seeds, min_windows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Verifier features and labels of the groups of ``seeds`` (see the module docstring)."""
+    cfg, k = det.config, det.config.box_scale
+    features, labels = [], []
+    for seed, difficulty in seeds:
+        for bgr, truth, ignore in scene_frames(seed, difficulty, 8):
+            boxes, margins = det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
+            group_boxes, counts, sums, best = group_stats(boxes, margins, cfg.group_iou, cfg.window_margin)
+            big = counts >= min_windows
+            group_boxes, counts, sums, best = group_boxes[big], counts[big], sums[big], best[big]
+            if not len(group_boxes):
+                continue
+            scaled = np.column_stack([group_boxes[:, :2] + (1 - k) * group_boxes[:, 2:] / 2, group_boxes[:, 2:] * k])
+            iou_counted = (box_iou(scaled[:, None], truth[~ignore][None]).max(axis=1) if (~ignore).any()
+                           else np.zeros(len(scaled)))
+            iou_any = box_iou(scaled[:, None], truth[None]).max(axis=1) if len(truth) else np.zeros(len(scaled))
+            clear = (iou_counted >= 0.5) | (iou_any < 0.3)
+            features.append(np.hstack([colour_features(bgr, group_boxes), group_features(counts, sums, best)])[clear])
+            labels.append(iou_counted[clear] >= 0.5)
+        print(f"training seed {seed}: {sum(len(v) for v in labels)} groups so far", flush=True)
+    return np.vstack(features), np.concatenate(labels)
+
+
+def operating_point(det: Detector, seeds, min_neighbors: list[int]) -> dict:
+    """The (min_neighbors, threshold) of best pooled detection minus false alarms on ``seeds`` (see above)."""
+    cfg = det.config
+    frames = [(bgr, truth, ignore, det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)))
+              for seed, difficulty in seeds for bgr, truth, ignore in scene_frames(seed, difficulty, 4)]
+    best = None
+    for n in min_neighbors:
+        det.config = dataclasses.replace(cfg, min_neighbors=n)
+        acc = DetectionAccumulator()
+        for bgr, truth, ignore, (boxes, margins) in frames:
+            group_boxes, probability = det._verified(bgr, boxes, margins, cfg.window_margin)
+            k = cfg.box_scale
+            scaled = np.column_stack([group_boxes[:, :2] + (1 - k) * group_boxes[:, 2:] / 2, group_boxes[:, 2:] * k])
+            acc.add_frame(scaled, probability, truth, ignore)
+        s = acc.summary()
+        recall, precision, score = (np.asarray(s[key]) for key in ("pr_recall", "pr_precision", "pr_score"))
+        j = int(np.argmax(recall - (1 - precision)))
+        point = {"min_neighbors": n, "verifier_threshold": float(np.log(score[j] / (1 - score[j]))) - 1e-6,
+                 "detection": float(recall[j]), "false_alarms": float(1 - precision[j])}
+        print(f"min_neighbors {n}: detection {point['detection']:.3f} at false alarms {point['false_alarms']:.3f}, "
+              f"log-odds threshold {point['verifier_threshold']:.3f}", flush=True)
+        if best is None or point["detection"] - point["false_alarms"] > best["detection"] - best["false_alarms"]:
+            best = point
+    det.config = cfg
+    return best
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default=str(MODELS_DIR / "uav_vehicles_verifier.json"))
+    parser.add_argument("--train-scenes", type=int, default=30, help="training scenes of difficulty 1 (half as "
+                        "many of difficulty 2)")
+    parser.add_argument("--min-windows", type=int, default=3, help="smallest group used as a training sample")
+    parser.add_argument("--min-neighbors", type=int, nargs="+", default=[3, 4, 6, 8])
+    parser.add_argument("--l2", type=float, default=1e-3)
+    parser.add_argument("--window-margin", type=float, default=None, help="the cascade's window_margin (default: "
+                        "the set-up's)")
+    args = parser.parse_args()
+    cv2.setNumThreads(1)
+    det = cascade_detector({} if args.window_margin is None else {"window_margin": args.window_margin})
+    first = UAV_TRAIN_SEEDS.start
+    train = ([(first + k, 1) for k in range(args.train_scenes)] +
+             [(first + 100 + k, 2) for k in range(args.train_scenes // 2)])
+    x, y = samples(det, train, args.min_windows)
+    verifier = fit_verifier(x, y, args.l2)
+    verifier.info.update({"train_seeds": [s for s, _ in train], "cascade": Path(det.config.model).name,
+                          "window_margin": det.config.window_margin,
+                          "min_windows": args.min_windows})
+    out = Path(args.out)
+    verifier.save(out)
+    det.verifier = verifier
+    tuning = ([(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] +
+              [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)])
+    verifier.info["operating_point"] = operating_point(det, tuning, args.min_neighbors)
+    verifier.info["tuning_seeds"] = [s for s, _ in tuning]
+    verifier.save(out)
+    print(f"wrote {out}: {verifier.info['positives']} vehicle / {verifier.info['samples'] - verifier.info['positives']} "
+          f"background groups; operating point {verifier.info['operating_point']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
