@@ -395,41 +395,65 @@ def _evaluate_level(blocks, px, py, m_lbp, m_contour, rows, cols, cells_per_bloc
     ``255 * value >= thresholds[j] * max`` (eqs. 3-4 without a division) and adds ``right[j]`` when
     it passes, else ``left[j]``. Stage s spans stumps ``ends[s-1] .. ends[s]-1`` and keeps the windows
     whose sum reaches its threshold. Stump by stump over the surviving windows, so that each stump
-    streams through one table plane.
+    streams through one table plane. Each surviving window carries its flat offsets into the three
+    tables and its two maxima (as floats), compacted after every stage: the stump loop then reads
+    ``table[offset + feature shift]`` without a division per window and stump.
     """
-    alive = np.arange(rows * cols)
-    score = np.zeros(rows * cols)
+    n = rows * cols
+    alive = np.arange(n)
+    bw, pxw, pyw = blocks.shape[2], px.shape[1], py.shape[1]
+    base_l = np.empty(n, np.int64)       # blocks[code].flat offset of the window's top-left block
+    base_x = np.empty(n, np.int64)       # px.flat offset of (row, x0[col])
+    base_y = np.empty(n, np.int64)       # py.flat offset of (y0[row], col)
+    ml = np.empty(n)
+    mc = np.empty(n)
+    for w in range(n):
+        r, c = w // cols, w % cols
+        base_l[w] = r * bw + c
+        base_x[w] = r * pxw + x0[c] if len(x0) == cols else 0
+        base_y[w] = y0[r] * pyw + c if len(y0) == rows else 0
+        ml[w] = np.float64(m_lbp[w]) if len(m_lbp) == n else 0.0
+        mc[w] = np.float64(m_contour[w]) if len(m_contour) == n else 0.0
+    flat_px, flat_py = px.ravel(), py.ravel()
+    plane_size = blocks.shape[1] * bw
+    flat_blocks = blocks.ravel()
+    score = np.zeros(n)
     start = 0
     for s in range(len(ends)):
-        if len(alive) == 0:
+        m = len(alive)
+        if m == 0:
             break
-        total = np.zeros(len(alive))
+        total = np.zeros(m)
         for j in range(start, ends[s]):
             f, t, lo, hi = features[j], np.float64(thresholds[j]), left[j], right[j]
             if f < LBP_DIM:
-                plane = blocks[f % N_CODES]
-                dy, dx = (f // N_CODES // 2) * cells_per_block, (f // N_CODES % 2) * cells_per_block
-                for a in range(len(alive)):
-                    w = alive[a]
-                    m = m_lbp[w]
-                    value = np.float64(plane[w // cols + dy, w % cols + dx])
-                    total[a] += hi if (m > 0 and 255.0 * value >= t * m) else lo
+                shift = (f % N_CODES) * plane_size + (f // N_CODES // 2) * cells_per_block * bw \
+                    + (f // N_CODES % 2) * cells_per_block
+                for a in range(m):
+                    mx = ml[a]
+                    value = np.float64(flat_blocks[base_l[a] + shift])
+                    total[a] += hi if (mx > 0 and 255.0 * value >= t * mx) else lo
             elif f < LBP_DIM + CONTOUR_SIZE:
                 k = f - LBP_DIM
-                for a in range(len(alive)):
-                    w = alive[a]
-                    m = m_contour[w]
-                    value = np.float64(px[w // cols, x0[w % cols] + k])
-                    total[a] += hi if (m > 0 and 255.0 * value >= t * m) else lo
+                for a in range(m):
+                    mx = mc[a]
+                    value = np.float64(flat_px[base_x[a] + k])
+                    total[a] += hi if (mx > 0 and 255.0 * value >= t * mx) else lo
             else:
-                k = f - LBP_DIM - CONTOUR_SIZE
-                for a in range(len(alive)):
-                    w = alive[a]
-                    m = m_contour[w]
-                    value = np.float64(py[y0[w // cols] + k, w % cols])
-                    total[a] += hi if (m > 0 and 255.0 * value >= t * m) else lo
-        score = total - stage_thresholds[s]
-        keep = score >= (last_stage_margin if s == len(ends) - 1 else 0.0)
-        alive, score = alive[keep], score[keep]
+                k = (f - LBP_DIM - CONTOUR_SIZE) * pyw
+                for a in range(m):
+                    mx = mc[a]
+                    value = np.float64(flat_py[base_y[a] + k])
+                    total[a] += hi if (mx > 0 and 255.0 * value >= t * mx) else lo
+        bar = last_stage_margin if s == len(ends) - 1 else 0.0
+        kept = 0
+        for a in range(m):               # compact the survivors and their offsets in place, in order
+            sc = total[a] - stage_thresholds[s]
+            if sc >= bar:
+                alive[kept], score[kept] = alive[a], sc
+                base_l[kept], base_x[kept], base_y[kept] = base_l[a], base_x[a], base_y[a]
+                ml[kept], mc[kept] = ml[a], mc[a]
+                kept += 1
+        alive = alive[:kept]
         start = ends[s]
-    return alive, score
+    return alive, score[:len(alive)]
