@@ -113,6 +113,19 @@ def test_contour_image_is_the_thresholded_absolute_laplacian(threshold):
         assert np.array_equal(F.contour_image(gray, threshold), (np.abs(lap) > threshold).astype(np.uint8))
 
 
+@pytest.mark.parametrize("threshold", [0.0, 0.5, 39.9, 40.0, 40.5, 254.5, 255.0, 300.0])
+def test_compiled_inner_contour_image_is_the_contour_image_without_its_rim(threshold):
+    """The scan's one-pass kernel gives contour_image's pixels exactly, its outermost pixels cleared."""
+    rng = np.random.default_rng(int(threshold * 10) + 1)
+    for gray in (rng.integers(0, 256, (41, 67), dtype=np.uint8),
+                 cv2.GaussianBlur(rng.integers(0, 256, (40, 60), dtype=np.uint8), (0, 0), 1.5),
+                 np.asfortranarray(rng.integers(0, 256, (3, 9), dtype=np.uint8))):
+        want = F.contour_image(gray, threshold)
+        want[0, :] = want[-1, :] = 0
+        want[:, 0] = want[:, -1] = 0
+        assert np.array_equal(F._inner_contour_image(gray, float(threshold)), want)
+
+
 def test_lbp_codes_match_eight_shifted_comparisons():
     """The compiled LBP kernel against the definition (neighbour k sets bit k when >= the centre)."""
     rng = np.random.default_rng(5)
