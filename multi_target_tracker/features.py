@@ -263,7 +263,11 @@ class LevelScan:
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
         x0 = 2 + s2 * np.arange(self.cols)
         b = _inner_contour_image(gray_c, float(edge_threshold))
-        self.px, self.py = _contour_potentials(b, s2, len(y0), len(x0), n)
+        # P_x down the columns of b, P_y down the columns of b transposed (its rows): the same sweep, which
+        # runs across a whole row at once (2x faster on the rows than sweeping along each row)
+        self.px = _column_potentials(b, s2, len(y0), n, True)
+        py_t = _column_potentials(cv2.transpose(b), s2, len(x0), n, False)
+        self.py = np.ascontiguousarray(py_t.T)   # (H, cols): neighbouring windows' values side by side
         run_x = cv2.dilate(self.px, np.ones((1, n), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         run_y = cv2.dilate(self.py, np.ones((n, 1), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
         self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
@@ -338,19 +342,19 @@ def _inner_contour_image(g, edge_threshold):
 
 
 @numba.njit(cache=True, nogil=True)
-def _contour_potentials(b, step, rows, cols, n):
-    """``P_x`` of every column below each window top row ``y0 = 2 + step * r`` (``(rows, W)``) and ``P_y``
-    of every row right of each window left column ``x0 = 2 + step * c`` (``(H, cols)``), float32.
+def _column_potentials(b, step, rows, n, from_bottom):
+    """Potentials down every column x of ``b`` for each window top row ``y0 = 2 + step * r`` (``(rows, W)``,
+    float32): ``sum_i b(y0+i, x) (n - i)`` (``from_bottom``: ``P_x``, the distance to the window's bottom
+    edge) or ``sum_i b(y0+i, x) (i + 1)`` (``P_y`` of the rows of ``b``'s transpose, from its left edge).
 
     ``b`` is the level's :func:`contour_image` with its outer pixels cleared. With prefix sums over
-    ``y' < y`` of ``b`` and ``y' b`` down each column, ``P_x(j) = sum_i b(y0+i, X)(n - i) =
-    (n + y0) sum_Y b - sum_Y Y b`` over rows ``y0 .. y0+n-1``; along each row ``P_y(i) = sum_X X b -
-    (x0 - 1) sum_X b`` over columns ``x0 .. x0+n-1``. The prefix sums are kept only where windows
-    start and end (every ``step`` pixels, as ``n`` is a multiple), each row and column swept once without a
-    test per pixel (2x faster than marking them pixel by pixel).
+    ``y' < y`` of ``b`` and ``y' b`` down each column, over rows ``y0 .. y0+n-1`` the first is
+    ``(n + y0) sum_Y b - sum_Y Y b`` and the second ``sum_Y Y b - (y0 - 1) sum_Y b``. The prefix sums are
+    kept only where windows start and end (every ``step`` rows, as ``n`` is a multiple), each row swept
+    once across all its columns without a test per pixel.
     """
     height, width = b.shape
-    marks, xmarks = rows + n // step, cols + n // step   # prefix rows 2, 2 + step, ...; columns alike
+    marks = rows + n // step                 # prefix rows 2, 2 + step, ...
     col_sum = np.zeros((marks, width), np.int64)
     col_ysum = np.zeros((marks, width), np.int64)
     run, yrun = np.zeros(width, np.int64), np.zeros(width, np.int64)
@@ -364,30 +368,15 @@ def _contour_potentials(b, step, rows, cols, n):
             y += 1
         col_sum[k] = run
         col_ysum[k] = yrun
-    px = np.empty((rows, width), np.float32)
+    out = np.empty((rows, width), np.float32)
     for r in range(rows):
         top = 2 + step * r
+        # out = a * count + b * ysum (the branch stays out of the loop)
+        a, b_ = (n + top, -1) if from_bottom else (1 - top, 1)
         for x in range(width):
-            count = col_sum[r + n // step, x] - col_sum[r, x]
-            px[r, x] = (n + top) * count - (col_ysum[r + n // step, x] - col_ysum[r, x])
-    py = np.empty((height, cols), np.float32)
-    row_sum = np.zeros(xmarks, np.int64)
-    row_xsum = np.zeros(xmarks, np.int64)
-    for y in range(height):
-        total, xtotal, x = 0, 0, 0
-        for k in range(xmarks):              # prefix columns 2 + step k, without a test per pixel
-            while x < min(2 + step * k, width):
-                v = b[y, x]
-                total += v
-                xtotal += x * v
-                x += 1
-            row_sum[k] = total
-            row_xsum[k] = xtotal
-        for c in range(cols):
-            left = 2 + step * c
-            count = row_sum[c + n // step] - row_sum[c]
-            py[y, c] = (row_xsum[c + n // step] - row_xsum[c]) - (left - 1) * count
-    return px, py
+            out[r, x] = a * (col_sum[r + n // step, x] - col_sum[r, x]) \
+                + b_ * (col_ysum[r + n // step, x] - col_ysum[r, x])
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
