@@ -81,6 +81,31 @@ def test_level_scan_equals_reference_window_by_window(stride):
             assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
 
 
+@pytest.mark.parametrize("feature_set", ["lbp", "contour"])
+def test_level_scan_cascade_of_one_feature_set_equals_the_cascade_on_its_vectors(feature_set):
+    """The compiled loop with one set of tables left empty (LBP-only and contour-only models, seed 003's Table 1),
+    on a level with a single column of windows and on a wider one."""
+    rng = np.random.default_rng(7)
+    frame = cv2.GaussianBlur(rng.integers(0, 255, (150, 190), dtype=np.uint8), (5, 5), 1.5)
+    for level in ((36, 97), (121, 97)):
+        scan = F.LevelScan(frame, level, 4, feature_set, 12.0)
+        every = scan.vectors(np.arange(scan.n_windows))
+        used = F.feature_range(feature_set)
+        varied = used[every[:, used].std(axis=0) > 0]
+        for seed in range(3):
+            stages = []
+            for k in range(2):
+                r = np.random.default_rng(10 * seed + k)
+                features = r.choice(varied, 8, replace=False)
+                thresholds = np.maximum(1, np.median(every[:, features], axis=0).astype(int) + 1)
+                left, right = -r.random(8), r.random(8)
+                stages.append(Stage(features, thresholds, left, right, float((left + right).sum() / 2)))
+            cascade = Cascade((32, 32), feature_set, 12.0, stages)
+            idx, score = scan.evaluate(cascade.packed(), 0.0)
+            ref_idx, ref_score = cascade.evaluate_vectors(every, 0.0)
+            assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
+
+
 def _random_stage(rng, vectors):
     """A stage of 12 stumps over texture, P_x and P_y features, split at each feature's median so
     that it passes some windows and rejects others."""
