@@ -81,6 +81,31 @@ def test_level_scan_equals_reference_window_by_window(stride):
             assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
 
 
+@pytest.mark.parametrize("feature_set", ["lbp", "contour"])
+def test_level_scan_cascade_of_one_feature_set_equals_the_cascade_on_its_vectors(feature_set):
+    """The compiled loop with one set of tables left empty (LBP-only and contour-only models, seed 003's Table 1),
+    on a level with a single column of windows and on a wider one."""
+    rng = np.random.default_rng(7)
+    frame = cv2.GaussianBlur(rng.integers(0, 255, (150, 190), dtype=np.uint8), (5, 5), 1.5)
+    for level in ((36, 97), (121, 97)):
+        scan = F.LevelScan(frame, level, 4, feature_set, 12.0)
+        every = scan.vectors(np.arange(scan.n_windows))
+        used = F.feature_range(feature_set)
+        varied = used[every[:, used].std(axis=0) > 0]
+        for seed in range(3):
+            stages = []
+            for k in range(2):
+                r = np.random.default_rng(10 * seed + k)
+                features = r.choice(varied, 8, replace=False)
+                thresholds = np.maximum(1, np.median(every[:, features], axis=0).astype(int) + 1)
+                left, right = -r.random(8), r.random(8)
+                stages.append(Stage(features, thresholds, left, right, float((left + right).sum() / 2)))
+            cascade = Cascade((32, 32), feature_set, 12.0, stages)
+            idx, score = scan.evaluate(cascade.packed(), 0.0)
+            ref_idx, ref_score = cascade.evaluate_vectors(every, 0.0)
+            assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
+
+
 def _random_stage(rng, vectors):
     """A stage of 12 stumps over texture, P_x and P_y features, split at each feature's median so
     that it passes some windows and rejects others."""
@@ -111,6 +136,19 @@ def test_contour_image_is_the_thresholded_absolute_laplacian(threshold):
                  cv2.GaussianBlur(rng.integers(0, 256, (40, 60), dtype=np.uint8), (0, 0), 1.5)):
         lap = cv2.Laplacian(gray, cv2.CV_16S, ksize=1)
         assert np.array_equal(F.contour_image(gray, threshold), (np.abs(lap) > threshold).astype(np.uint8))
+
+
+@pytest.mark.parametrize("threshold", [0.0, 0.5, 39.9, 40.0, 40.5, 254.5, 255.0, 300.0])
+def test_compiled_inner_contour_image_is_the_contour_image_without_its_rim(threshold):
+    """The scan's one-pass kernel gives contour_image's pixels exactly, its outermost pixels cleared."""
+    rng = np.random.default_rng(int(threshold * 10) + 1)
+    for gray in (rng.integers(0, 256, (41, 67), dtype=np.uint8),
+                 cv2.GaussianBlur(rng.integers(0, 256, (40, 60), dtype=np.uint8), (0, 0), 1.5),
+                 np.asfortranarray(rng.integers(0, 256, (3, 9), dtype=np.uint8))):
+        want = F.contour_image(gray, threshold)
+        want[0, :] = want[-1, :] = 0
+        want[:, 0] = want[:, -1] = 0
+        assert np.array_equal(F._inner_contour_image(gray, float(threshold)), want)
 
 
 def test_lbp_codes_match_eight_shifted_comparisons():
