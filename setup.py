@@ -12,8 +12,8 @@ CONSOLE_SCRIPTS = {
     "association_node": "multi_target_tracker.executables:association_node",
     "docking_tracker_node": "aircraft_docking_tracker.executables:docking_tracker_node",
     # MCAP recording and replay
-    "mcap_record": "aircraft_docking_tracker.mcap_record:main",
-    "mcap_play": "aircraft_docking_tracker.mcap_play:main",
+    "mcap_record": "aircraft_docking_tracker.io.mcap_record:main",
+    "mcap_play": "aircraft_docking_tracker.io.mcap_play:main",
     # offline tools over the same cores
     "sot_track": "aircraft_docking_tracker.sot_track:main",
     "detect": "multi_target_tracker.detect:main",

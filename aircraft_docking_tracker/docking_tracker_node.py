@@ -1,5 +1,5 @@
 """``docking_tracker_node``: images in, the docking aircraft's affine quadrilateral out (seed 000 §2
-via :mod:`aircraft_docking_tracker.docking`, :mod:`~aircraft_docking_tracker.ispf`).
+via :mod:`aircraft_docking_tracker.docking.tracker`, :mod:`~aircraft_docking_tracker.docking.ispf`).
 
 Topics (relative names):
 
@@ -31,12 +31,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bag import stamp_to_ns
+from .io.bag import stamp_to_ns
 from .config import param
-from .docking import LOST, STATE_NAMES, TRACKING, WAITING, DockingConfig, DockingResult, DockingTracker, state_row
-from .node_base import PerceptionNode, run_node
+from .docking.tracker import LOST, STATE_NAMES, TRACKING, WAITING, DockingConfig, DockingResult, DockingTracker, state_row
+from .ros.node_base import PerceptionNode, run_node
 from .object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
-from .processing import DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected, best_rows
+from .ros.processing import DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected, best_rows
 
 NODE_NAME = "docking_tracker"
 NODE_PREFIX = "node."
@@ -128,7 +128,7 @@ class DockingProcessor(MessageProcessor):
 
     def _image(self, msg):
         from .images import to_bgr8, to_mono8  # noqa: PLC0415
-        from .markers import delete_all, polygon_image_marker, polygon_marker, text_marker  # noqa: PLC0415
+        from .ros.markers import delete_all, polygon_image_marker, polygon_marker, text_marker  # noqa: PLC0415
         from .scenarios.messages import quad_to_polygon  # noqa: PLC0415
         from visualization_msgs.msg import MarkerArray  # noqa: PLC0415
 

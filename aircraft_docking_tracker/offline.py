@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from .bag import BagError, BagReader, BagWriter, check_outputs, get_message_class
+from .io.bag import BagError, BagReader, BagWriter, check_outputs, get_message_class
 from .config import ConfigError, tool_parameters
-from .processing import MessageProcessor, ProcessingStats, ProcessorSpec, process_guarded
+from .ros.processing import MessageProcessor, ProcessingStats, ProcessorSpec, process_guarded
 
 # node name -> module with a SPEC (ProcessorSpec); the YAML file of each is config/<name>.yaml
 NODE_MODULES = {

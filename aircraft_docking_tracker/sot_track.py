@@ -26,8 +26,8 @@ import numpy as np
 from tqdm import tqdm
 
 from .config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
-from .bag import check_outputs
-from .docking import DockingConfig, DockingTracker
+from .io.bag import check_outputs
+from .docking.tracker import DockingConfig, DockingTracker
 from .geometry import quad_to_box
 
 NODE_NAME = "docking_tracker"
@@ -116,7 +116,7 @@ def _video_sequence(path: Path) -> Sequence:
 
 
 def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "ground_truth/polygon") -> Sequence:
-    from .bag import BagError, BagReader, stamp_to_ns  # noqa: PLC0415
+    from .io.bag import BagError, BagReader, stamp_to_ns  # noqa: PLC0415
     from .images import to_mono8  # noqa: PLC0415
     from .scenarios.messages import polygon_to_quad  # noqa: PLC0415
 

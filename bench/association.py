@@ -108,7 +108,7 @@ def hota_worker(in_path: str, out_path: str) -> None:
 
 def trackeval_hota(python: Path, gt: np.ndarray, rows: np.ndarray, n_frames: int) -> dict:
     """HOTA, DetA, AssA of ``rows`` computed by TrackEval itself in the peers' venv (the check of our port)."""
-    from aircraft_docking_tracker import motchallenge as mc  # noqa: PLC0415
+    from aircraft_docking_tracker.io import motchallenge as mc  # noqa: PLC0415
 
     with tempfile.TemporaryDirectory() as tmp:
         src, dst = Path(tmp) / "in.npz", Path(tmp) / "out.json"
@@ -221,7 +221,7 @@ def variants():
 
 def load_sequences(quick: bool) -> dict:
     """name -> dict(det rows, gt rows, fps, n_frames). MOT rows (``motchallenge.MOT_ROW_DTYPE``)."""
-    from aircraft_docking_tracker import motchallenge as mc  # noqa: PLC0415
+    from aircraft_docking_tracker.io import motchallenge as mc  # noqa: PLC0415
 
     data = Path(os.environ.get("ADT_SHARED_DATA", REPO.parent / "shared" / "data")) / "mot"
     seqs = {}
@@ -244,7 +244,7 @@ def load_sequences(quick: bool) -> dict:
 def synthetic_uav(quick: bool, scenes=UAV_SCENES) -> dict:
     """UAV scenes (issue 3's generator): visible ground truth -> detections with misses, clutter, jitter."""
     from aircraft_docking_tracker.scenarios.uav import UavScene, UavSceneConfig, synthesize_detections  # noqa: PLC0415
-    from aircraft_docking_tracker import motchallenge as mc  # noqa: PLC0415
+    from aircraft_docking_tracker.io import motchallenge as mc  # noqa: PLC0415
 
     out = {}
     frames = 100 if quick else 400
@@ -395,7 +395,7 @@ def ensure_peer_venv() -> Path | None:
 def run_peer(python: Path, name: str, det: np.ndarray, fps: float, n_frames: int,
              repeats: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Run one peer in its venv; returns (MOT rows, per-frame seconds)."""
-    from aircraft_docking_tracker import motchallenge as mc  # noqa: PLC0415
+    from aircraft_docking_tracker.io import motchallenge as mc  # noqa: PLC0415
 
     with tempfile.TemporaryDirectory() as tmp:
         src, dst = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
@@ -412,7 +412,7 @@ def run_peer(python: Path, name: str, det: np.ndarray, fps: float, n_frames: int
 
 def scaling_scene(n: int, frames: int = 8, seed: int = 0) -> np.ndarray:
     """n targets spread over a square with room for them, constant velocities, jittered detections."""
-    from aircraft_docking_tracker import motchallenge as mc  # noqa: PLC0415
+    from aircraft_docking_tracker.io import motchallenge as mc  # noqa: PLC0415
 
     rng = np.random.default_rng(seed)
     side = 60.0 * np.sqrt(n) + 200
@@ -429,7 +429,7 @@ def scaling_scene(n: int, frames: int = 8, seed: int = 0) -> np.ndarray:
 def scaling(variant_list: dict, python: Path | None, quick: bool) -> dict:
     """Milliseconds per frame (median of the last frames) against the number of targets."""
     from multi_target_tracker.association import MultiTargetTracker  # noqa: PLC0415
-    from aircraft_docking_tracker import motchallenge as mc  # noqa: PLC0415
+    from aircraft_docking_tracker.io import motchallenge as mc  # noqa: PLC0415
 
     frames = 6 if quick else 10
     out: dict = {}

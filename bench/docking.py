@@ -202,7 +202,7 @@ def run_ours(seq: dict, overrides: dict, seed: int = 0, start: str = "box") -> d
     synthetic stand scenes it runs as the stand does (config/stand_camera.yaml's rules, the cascade's
     rows every frame: re-acquisition while lost, the override rule); real sequences have no detector."""
     from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir  # noqa: PLC0415
-    from aircraft_docking_tracker.docking import DockingConfig  # noqa: PLC0415
+    from aircraft_docking_tracker.docking.tracker import DockingConfig  # noqa: PLC0415
     from aircraft_docking_tracker.sot_track import track  # noqa: PLC0415
 
     frames = (cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in seq["files"])
@@ -259,7 +259,7 @@ def reacquisition(seq: dict, seed: int, blackout: tuple[int, int]) -> dict:
     from the cascade's aircraft row while lost). Returns when the track was declared lost, the
     frames after the dropout until it was tracking again with polygon IoU >= 0.5 (-1: never)."""
     from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir  # noqa: PLC0415
-    from aircraft_docking_tracker.docking import LOST, TRACKING, DockingConfig, DockingTracker  # noqa: PLC0415
+    from aircraft_docking_tracker.docking.tracker import LOST, TRACKING, DockingConfig, DockingTracker  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.sot_metrics import polygon_iou  # noqa: PLC0415
 
     stand = load_yaml_parameters(package_config_dir() / "stand_camera.yaml", "docking_tracker")
@@ -343,7 +343,7 @@ def box_oracle(seq: dict) -> np.ndarray:
     """Quadrilaterals (N, 4, 2) of a perfect follower of the start box: the first frame's axis-aligned
     box moved by the true affine motion A_t A_0^{-1}. What any tracker that follows exactly the
     region it was given scores against the true polygon (the cap of a loose-box start)."""
-    from aircraft_docking_tracker import affine_group as ag  # noqa: PLC0415
+    from aircraft_docking_tracker.docking import affine_group as ag  # noqa: PLC0415
 
     x, y, w, h = seq["gt_boxes"][0]
     box = np.array([[x, y, 1.0], [x + w, y, 1.0], [x + w, y + h, 1.0], [x, y + h, 1.0]]).T
@@ -412,7 +412,7 @@ def frame_errors(pred: np.ndarray, truth: np.ndarray) -> dict:
     of the affine parameters (log scale and log aspect ratios, rotation [deg], the centre's offset along
     the true quadrilateral's own axes in its widths / heights) and, per parameter group, the IoU the frame
     would have if that group alone were the truth's (the IoU one exact component would win)."""
-    from aircraft_docking_tracker import affine_group as ag  # noqa: PLC0415
+    from aircraft_docking_tracker.docking import affine_group as ag  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.sot_metrics import polygon_iou  # noqa: PLC0415
 
     n = len(truth)
@@ -535,7 +535,7 @@ def diagnosis_markdown(runs: list[dict], seeds: int, runtime: float) -> list[str
 # The run
 # ================================================================================================
 def score(seq: dict, out: dict) -> dict:
-    from aircraft_docking_tracker import affine_group as ag  # noqa: PLC0415
+    from aircraft_docking_tracker.docking import affine_group as ag  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.sot_metrics import polygon_iou, score_sequence  # noqa: PLC0415
     from aircraft_docking_tracker.geometry import box_to_quad  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.speed import fps  # noqa: PLC0415

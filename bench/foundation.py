@@ -24,10 +24,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Image, PointCloud2
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
 from aircraft_docking_tracker.images import numpy_to_image
-from aircraft_docking_tracker.mcap_play import Player, PlayOptions
-from aircraft_docking_tracker.mcap_record import Recorder
+from aircraft_docking_tracker.io.mcap_play import Player, PlayOptions
+from aircraft_docking_tracker.io.mcap_record import Recorder
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, table_to_cloud
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -28,10 +28,10 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from aircraft_docking_tracker.bag import ns_to_stamp  # noqa: E402
+from aircraft_docking_tracker.io.bag import ns_to_stamp  # noqa: E402
 from aircraft_docking_tracker.images import _check_png_chunks, compressed_dimensions  # noqa: E402
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, table_to_cloud  # noqa: E402
-from aircraft_docking_tracker.processing import ProcessingStats, process_guarded  # noqa: E402
+from aircraft_docking_tracker.ros.processing import ProcessingStats, process_guarded  # noqa: E402
 from aircraft_docking_tracker.scenarios.faults import png_bomb  # noqa: E402
 from multi_target_tracker.association_node import AssociationNodeConfig, AssociationProcessor  # noqa: E402
 

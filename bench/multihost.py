@@ -50,7 +50,7 @@ def role_publish(size: str, hz: float, seconds: float, reliable: bool, out: str)
     from rclpy.qos import QoSProfile, qos_profile_sensor_data  # noqa: PLC0415
     from sensor_msgs.msg import Image  # noqa: PLC0415
 
-    from aircraft_docking_tracker.bag import ns_to_stamp  # noqa: PLC0415
+    from aircraft_docking_tracker.io.bag import ns_to_stamp  # noqa: PLC0415
 
     w, h = SIZES[size]
     rclpy.init()
@@ -212,7 +212,7 @@ def node_costs(frames: int) -> dict:
     """CPU ms per frame of each node's processor at its defaults, on rendered docking frames."""
     from aircraft_docking_tracker.offline import OfflineRun, build_processor  # noqa: PLC0415
     from aircraft_docking_tracker.images import numpy_to_image  # noqa: PLC0415
-    from aircraft_docking_tracker.bag import ns_to_stamp  # noqa: PLC0415
+    from aircraft_docking_tracker.io.bag import ns_to_stamp  # noqa: PLC0415
     from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig  # noqa: PLC0415
 
     out = {}

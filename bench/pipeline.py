@@ -46,7 +46,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data  # noqa: E402
 
-from aircraft_docking_tracker.bag import BagReader, get_message_class, ns_to_stamp  # noqa: E402
+from aircraft_docking_tracker.io.bag import BagReader, get_message_class, ns_to_stamp  # noqa: E402
 from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
 from aircraft_docking_tracker.images import numpy_to_compressed, numpy_to_image  # noqa: E402
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, table_to_cloud  # noqa: E402

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aircraft_docking_tracker.bag import stamp_to_ns
+from aircraft_docking_tracker.io.bag import stamp_to_ns
 from aircraft_docking_tracker.config import param
-from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
-from aircraft_docking_tracker.node_base import PerceptionNode, run_node
+from aircraft_docking_tracker.ros.markers import boxes_to_image_marker, boxes_to_markers
+from aircraft_docking_tracker.ros.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import (DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_boxes,
                                                    table_to_cloud)
-from aircraft_docking_tracker.processing import (DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected,
+from aircraft_docking_tracker.ros.processing import (DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected,
                                                  best_rows)
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker, Tracks
 from multi_target_tracker.kalman import KalmanConfig
@@ -79,7 +79,7 @@ def draw_tracks(bgr: np.ndarray, table: np.ndarray) -> np.ndarray:
     """The image with one box and id label per track (OpenCV drawing)."""
     import cv2  # noqa: PLC0415
 
-    from aircraft_docking_tracker.markers import id_color  # noqa: PLC0415
+    from aircraft_docking_tracker.ros.markers import id_color  # noqa: PLC0415
 
     out = np.ascontiguousarray(bgr).copy()
     for row in table:

@@ -22,7 +22,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from aircraft_docking_tracker.bag import check_outputs
+from aircraft_docking_tracker.io.bag import check_outputs
 from aircraft_docking_tracker.cli import AtomicFile
 from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from multi_target_tracker.detector import Detector, DetectorConfig
@@ -60,7 +60,7 @@ def frames(source: str | Path) -> Iterator[tuple[str, np.ndarray, int]]:
             raise ValueError(f"cannot read image {source}")
         yield source.name, image, 0
     else:
-        from aircraft_docking_tracker.bag import BagReader, stamp_to_ns  # noqa: PLC0415
+        from aircraft_docking_tracker.io.bag import BagReader, stamp_to_ns  # noqa: PLC0415
         from aircraft_docking_tracker.images import to_bgr8  # noqa: PLC0415
 
         reader = BagReader(source)
@@ -108,7 +108,7 @@ def run(args) -> dict:
     out = sys.stdout if args.output == "-" else AtomicFile(args.output)
     writer = None
     if args.bag:
-        from aircraft_docking_tracker.bag import BagWriter  # noqa: PLC0415
+        from aircraft_docking_tracker.io.bag import BagWriter  # noqa: PLC0415
         writer = BagWriter(args.bag, overwrite=True, atomic=True)
     from tqdm import tqdm  # noqa: PLC0415
 
@@ -141,7 +141,7 @@ def run(args) -> dict:
 def _write_frame(writer, image: np.ndarray, table: np.ndarray, stamp: int, frame_id: str, write_image: bool) -> None:
     from std_msgs.msg import Header  # noqa: PLC0415
 
-    from aircraft_docking_tracker.bag import ns_to_stamp  # noqa: PLC0415
+    from aircraft_docking_tracker.io.bag import ns_to_stamp  # noqa: PLC0415
     from aircraft_docking_tracker.images import numpy_to_image  # noqa: PLC0415
     from aircraft_docking_tracker.object_table import table_to_cloud  # noqa: PLC0415
 
@@ -153,7 +153,7 @@ def _write_frame(writer, image: np.ndarray, table: np.ndarray, stamp: int, frame
 
 def _copy_bag(source: str, writer) -> None:
     """Every message of the input bag except its old detections (ours replace them)."""
-    from aircraft_docking_tracker.bag import BagReader  # noqa: PLC0415
+    from aircraft_docking_tracker.io.bag import BagReader  # noqa: PLC0415
 
     reader = BagReader(source)
     for info in reader.topics.values():  # recorded schemas: types not installed here are copied too

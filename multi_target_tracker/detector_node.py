@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from aircraft_docking_tracker.config import param
-from aircraft_docking_tracker.markers import boxes_to_image_marker, boxes_to_markers
-from aircraft_docking_tracker.node_base import PerceptionNode, run_node
+from aircraft_docking_tracker.ros.markers import boxes_to_image_marker, boxes_to_markers
+from aircraft_docking_tracker.ros.node_base import PerceptionNode, run_node
 from aircraft_docking_tracker.object_table import table_to_cloud
-from aircraft_docking_tracker.processing import ERROR, ImageLimit, MessageProcessor, ProcessorSpec, Rejected
+from aircraft_docking_tracker.ros.processing import ERROR, ImageLimit, MessageProcessor, ProcessorSpec, Rejected
 from multi_target_tracker.detector import Detector, DetectorConfig
 
 NODE_NAME = "detector"

@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from aircraft_docking_tracker.bag import BagError, check_outputs
+from aircraft_docking_tracker.io.bag import BagError, check_outputs
 from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
-from aircraft_docking_tracker import motchallenge as mc
+from aircraft_docking_tracker.io import motchallenge as mc
 from multi_target_tracker.association import AssociationConfig, MultiTargetTracker
 from multi_target_tracker.kalman import KalmanConfig
 

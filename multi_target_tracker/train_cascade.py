@@ -153,7 +153,7 @@ def read_bag(path: str | Path, every: int = 1, min_score: float = 0.0) -> list[L
     Table rows with a ``state`` other than 1 (e.g. a hidden vehicle) or a ``score`` below ``min_score``
     (e.g. the visible fraction) are *ignored*: not positives, and no negative is cut over them.
     """
-    from aircraft_docking_tracker.bag import BagReader, stamp_to_ns  # noqa: PLC0415
+    from aircraft_docking_tracker.io.bag import BagReader, stamp_to_ns  # noqa: PLC0415
     from aircraft_docking_tracker.images import to_mono8  # noqa: PLC0415
     from aircraft_docking_tracker.object_table import cloud_to_table  # noqa: PLC0415
 
@@ -486,7 +486,7 @@ def load_training_data(args) -> list[LabelledImage]:
 
 
 def run(args) -> Cascade:
-    from aircraft_docking_tracker.bag import check_outputs  # noqa: PLC0415
+    from aircraft_docking_tracker.io.bag import check_outputs  # noqa: PLC0415
 
     # the model is saved after every stage: `-o` must not be one of the bags or folders trained from
     check_outputs([args.output], [*args.yolo, *args.voc, *args.bag, *args.negative_images], "train_cascade")

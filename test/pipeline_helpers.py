@@ -5,9 +5,9 @@ import threading
 import time
 from pathlib import Path
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter
-from aircraft_docking_tracker.mcap_play import Player, PlayOptions
-from aircraft_docking_tracker.mcap_record import Recorder
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter
+from aircraft_docking_tracker.io.mcap_play import Player, PlayOptions
+from aircraft_docking_tracker.io.mcap_record import Recorder
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
 from aircraft_docking_tracker.scenarios.make_scenario import write_docking_bag, write_uav_bag
 from aircraft_docking_tracker.scenarios.uav import UavScene, UavSceneConfig

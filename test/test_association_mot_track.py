@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from conftest import require_data
-from aircraft_docking_tracker import motchallenge as mc
+from aircraft_docking_tracker.io import motchallenge as mc
 from multi_target_tracker.mot_track import main
 
 

@@ -11,11 +11,11 @@ from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
 from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
-from aircraft_docking_tracker.processing import ProcessingStats, process_guarded
+from aircraft_docking_tracker.ros.processing import ProcessingStats, process_guarded
 from multi_target_tracker.association import AssociationConfig
 from multi_target_tracker.association_node import (AssociationNode, AssociationNodeConfig, AssociationOutputConfig,
                                                    AssociationProcessor)

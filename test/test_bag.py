@@ -8,7 +8,7 @@ from geometry_msgs.msg import Point32, PolygonStamped
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from aircraft_docking_tracker.bag import (
+from aircraft_docking_tracker.io.bag import (
     BagError, BagReader, BagWriter, message_definition, ns_to_stamp, recover, stamp_to_ns, type_hash)
 from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
@@ -152,7 +152,7 @@ def test_writer_refuses_to_overwrite(tmp_path):
 def test_replay_qos_from_recorded_metadata_and_from_damaged_metadata():
     from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-    from aircraft_docking_tracker.bag import qos_from_metadata
+    from aircraft_docking_tracker.io.bag import qos_from_metadata
 
     good = ("- history: 1\n  depth: 5\n  reliability: 1\n  durability: 2\n"
             "- history: 1\n  depth: 20\n  reliability: 1\n  durability: 2\n")

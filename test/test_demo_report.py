@@ -7,7 +7,7 @@ import re
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from aircraft_docking_tracker.bag import BagWriter
+from aircraft_docking_tracker.io.bag import BagWriter
 from aircraft_docking_tracker.evaluation.report import format_markdown
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE
 from aircraft_docking_tracker.scenarios import messages as m

@@ -11,12 +11,12 @@ from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
 from aircraft_docking_tracker.geometry import box_iou
 from aircraft_docking_tracker.images import numpy_to_compressed, numpy_to_image
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table
-from aircraft_docking_tracker.processing import ProcessingStats, process_guarded
+from aircraft_docking_tracker.ros.processing import ProcessingStats, process_guarded
 from multi_target_tracker import detect
 from multi_target_tracker.detector import DetectorConfig
 from multi_target_tracker.detector_node import DetectorNode, DetectorNodeConfig, DetectorProcessor

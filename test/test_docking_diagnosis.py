@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker.docking import affine_group as ag
 
 _SPEC = importlib.util.spec_from_file_location("bench_docking", Path(__file__).resolve().parents[1] / "bench" / "docking.py")
 bench = importlib.util.module_from_spec(_SPEC)

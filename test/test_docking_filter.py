@@ -3,11 +3,11 @@ import cv2
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker import affine_group as ag
-from aircraft_docking_tracker.appearance import (AppearanceConfig, AppearanceError, IncrementalSubspace,
+from aircraft_docking_tracker.docking import affine_group as ag
+from aircraft_docking_tracker.docking.appearance import (AppearanceConfig, AppearanceError, IncrementalSubspace,
                                                  ObservationModel, normalize)
 from aircraft_docking_tracker.evaluation.sot_metrics import polygon_iou
-from aircraft_docking_tracker.ispf import ISPF, AffineParticleFilter, FilterConfig, FrameError, make_filter
+from aircraft_docking_tracker.docking.ispf import ISPF, AffineParticleFilter, FilterConfig, FrameError, make_filter
 
 
 def textured(shape, rng, blur=2.0):

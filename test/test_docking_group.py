@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker.docking import affine_group as ag
 
 
 @pytest.fixture

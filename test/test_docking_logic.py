@@ -1,12 +1,12 @@
-"""Start, loss and re-acquisition of the docking track (aircraft_docking_tracker.docking)."""
+"""Start, loss and re-acquisition of the docking track (aircraft_docking_tracker.docking.tracker)."""
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker.docking import affine_group as ag
 from aircraft_docking_tracker.config import ConfigError, from_mapping
-from aircraft_docking_tracker.docking import (LOST, STATE_DTYPE, TRACKING, WAITING, DockingConfig,
+from aircraft_docking_tracker.docking.tracker import (LOST, STATE_DTYPE, TRACKING, WAITING, DockingConfig,
                                               DockingResult, DockingTracker, best_detection, state_row)
-from aircraft_docking_tracker.ispf import FrameResult
+from aircraft_docking_tracker.docking.ispf import FrameResult
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from test_docking_filter import moving_target_scene
 

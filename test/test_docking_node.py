@@ -11,17 +11,17 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 
-from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker.docking import affine_group as ag
 from aircraft_docking_tracker import offline
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp, stamp_to_ns
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp, stamp_to_ns
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
-from aircraft_docking_tracker.docking import LOST, STATE_DTYPE, TRACKING, WAITING, DockingConfig
+from aircraft_docking_tracker.docking.tracker import LOST, STATE_DTYPE, TRACKING, WAITING, DockingConfig
 from aircraft_docking_tracker.docking_tracker_node import (DockingNodeConfig, DockingProcessor,
                                                            DockingTrackerNode)
 from aircraft_docking_tracker.evaluation.sot_metrics import polygon_iou
 from aircraft_docking_tracker.images import numpy_to_compressed, numpy_to_image
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
-from aircraft_docking_tracker.processing import ProcessingStats, process_guarded
+from aircraft_docking_tracker.ros.processing import ProcessingStats, process_guarded
 from aircraft_docking_tracker.scenarios.messages import polygon_to_quad
 
 from ros_helpers import ros_context, spin_until, wait_for_subscribers

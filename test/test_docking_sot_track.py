@@ -4,9 +4,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from aircraft_docking_tracker import affine_group as ag
+from aircraft_docking_tracker.docking import affine_group as ag
 from aircraft_docking_tracker import sot_track
-from aircraft_docking_tracker.bag import BagWriter
+from aircraft_docking_tracker.io.bag import BagWriter
 from aircraft_docking_tracker.geometry import box_iou
 from aircraft_docking_tracker.images import numpy_to_image
 from aircraft_docking_tracker.scenarios.datasets import read_sot_boxes

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker import affine_group as ag
-from aircraft_docking_tracker.docking import DockingConfig, DockingTracker
+from aircraft_docking_tracker.docking import affine_group as ag
+from aircraft_docking_tracker.docking.tracker import DockingConfig, DockingTracker
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
-from aircraft_docking_tracker.static_background import StaticBackground, foreground_extent, state_mask, target_motion
+from aircraft_docking_tracker.docking.static_background import StaticBackground, foreground_extent, state_mask, target_motion
 
 SIZE = (240, 320)
 
@@ -253,7 +253,7 @@ def test_a_slow_pan_that_passes_the_shift_test_is_judged_moving_and_a_rainy_stan
     per-frame shift test (phase correlation median < max_shift / 2) but its stale ratio ends above 1.3x
     max_stale and the camera counts as moving from frame 10 on, nothing trusted; rainy synthetic stands
     are never judged moving, their ratio (once the window is full) below max_stale / 1.3."""
-    from aircraft_docking_tracker.static_background import _level_image  # noqa: PLC0415
+    from aircraft_docking_tracker.docking.static_background import _level_image  # noqa: PLC0415
 
     frames, state = panning_clip(1.0)
     model = StaticBackground(motion=True)

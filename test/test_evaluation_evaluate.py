@@ -7,7 +7,7 @@ import motmetrics
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker.bag import BagWriter
+from aircraft_docking_tracker.io.bag import BagWriter
 from aircraft_docking_tracker.evaluation import evaluate as ev
 from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE

@@ -45,7 +45,7 @@ def seed_bag(path: Path, frames: int = 12, chunk_size: int = 1500) -> Path:
     the ground truth of each, in many small chunks (so that mutations hit chunk structure)."""
     import numpy as np
 
-    from aircraft_docking_tracker.bag import BagWriter
+    from aircraft_docking_tracker.io.bag import BagWriter
     from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE
     from aircraft_docking_tracker.scenarios import messages as m
 
@@ -120,7 +120,7 @@ def split_bag(folder: Path, damaged: bytes, sound: bytes, rng: random.Random) ->
 
 # ----------------------------------------------------------------------------------- targets
 def _read(path: Path) -> str:
-    from aircraft_docking_tracker.bag import BagError, BagReader
+    from aircraft_docking_tracker.io.bag import BagError, BagReader
 
     try:
         reader = BagReader(path)
@@ -160,8 +160,8 @@ class _Node:
 
 
 def _play(path: Path) -> str:
-    from aircraft_docking_tracker.bag import BagError, BagReader
-    from aircraft_docking_tracker.mcap_play import Player, PlayOptions
+    from aircraft_docking_tracker.io.bag import BagError, BagReader
+    from aircraft_docking_tracker.io.mcap_play import Player, PlayOptions
 
     try:
         reader = BagReader(path)

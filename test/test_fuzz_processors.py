@@ -32,12 +32,12 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2, PointField
 from std_msgs.msg import Header
 
 from aircraft_docking_tracker import docking_tracker_node
-from aircraft_docking_tracker.bag import ns_to_stamp
+from aircraft_docking_tracker.io.bag import ns_to_stamp
 from aircraft_docking_tracker.scenarios import faults
 from aircraft_docking_tracker.config import ConfigError, from_mapping
 from aircraft_docking_tracker.images import LAYOUTS, ENCODINGS
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, table_to_cloud
-from aircraft_docking_tracker.processing import ProcessingStats, process_guarded
+from aircraft_docking_tracker.ros.processing import ProcessingStats, process_guarded
 from multi_target_tracker import association_node, detector_node
 
 from ros_helpers import ros_context
@@ -348,7 +348,7 @@ def test_nodes_report_the_parameters_they_run_under_random_overrides():
     """Start each node with random overrides (bad ones among them), then set them again at runtime:
     it starts and keeps running, and for every field the parameter reports the value its config holds."""
     from aircraft_docking_tracker.config import spec_of  # noqa: PLC0415
-    from aircraft_docking_tracker.node_base import _from_ros  # noqa: PLC0415
+    from aircraft_docking_tracker.ros.node_base import _from_ros  # noqa: PLC0415
 
     rng = np.random.default_rng(SEED + 1)
     deadline = time.monotonic() + SECONDS

@@ -17,16 +17,16 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from aircraft_docking_tracker import node_base
-from aircraft_docking_tracker.bag import ns_to_stamp
+from aircraft_docking_tracker.ros import node_base
+from aircraft_docking_tracker.io.bag import ns_to_stamp
 from aircraft_docking_tracker.config import ConfigError, from_mapping, package_config_dir
-from aircraft_docking_tracker.docking import DockingConfig
+from aircraft_docking_tracker.docking.tracker import DockingConfig
 from aircraft_docking_tracker.docking_tracker_node import DockingProcessor, DockingTrackerNode
 from aircraft_docking_tracker.images import ImageConversionError, compressed_dimensions, numpy_to_image, to_mono8
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
-from aircraft_docking_tracker.processing import MessageProcessor, ProcessingStats, process_guarded
+from aircraft_docking_tracker.ros.processing import MessageProcessor, ProcessingStats, process_guarded
 from aircraft_docking_tracker.scenarios.faults import png_bomb
-from aircraft_docking_tracker import motchallenge as mc
+from aircraft_docking_tracker.io import motchallenge as mc
 from multi_target_tracker.association_node import AssociationProcessor
 from multi_target_tracker.cascade import Cascade, CascadeError
 from multi_target_tracker.detector import MODELS_DIR, DetectorConfig

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from visualization_msgs.msg import ImageMarker, MarkerArray
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter
-from aircraft_docking_tracker.markers import boxes_to_image_marker, id_color, polygon_image_marker
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter
+from aircraft_docking_tracker.ros.markers import boxes_to_image_marker, id_color, polygon_image_marker
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, table_to_cloud
 from aircraft_docking_tracker.offline import OfflineRun
 from aircraft_docking_tracker.scenarios.messages import header

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker.evaluation.mot_metrics import MotEvaluator, evaluate_rows, iou_distances
-from aircraft_docking_tracker import motchallenge as mc
+from aircraft_docking_tracker.io import motchallenge as mc
 
 
 def test_iou_distances_hand_computed():

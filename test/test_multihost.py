@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker import netns
-from aircraft_docking_tracker.bag import BagReader, BagWriter, stamp_to_ns
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, stamp_to_ns
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table
 from aircraft_docking_tracker.offline import build_processor, run
 from aircraft_docking_tracker.processes import NodeProcess, executable_path, wait_until

@@ -11,11 +11,11 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
-from aircraft_docking_tracker.bag import ns_to_stamp
+from aircraft_docking_tracker.io.bag import ns_to_stamp
 from aircraft_docking_tracker.config import param
 from aircraft_docking_tracker.images import numpy_to_image, to_mono8
-from aircraft_docking_tracker.node_base import PerceptionNode
-from aircraft_docking_tracker.processing import MessageProcessor, ProcessingStats, process_guarded
+from aircraft_docking_tracker.ros.node_base import PerceptionNode
+from aircraft_docking_tracker.ros.processing import MessageProcessor, ProcessingStats, process_guarded
 
 from ros_helpers import ros_context, spin_until, wait_for_subscribers
 
@@ -160,7 +160,7 @@ def test_image_qos_is_best_effort_and_overridable_to_reliable_by_the_standard_pa
     node built from a spec does not list that override as an unknown parameter."""
     from rclpy.qos import ReliabilityPolicy
 
-    from aircraft_docking_tracker.processing import ProcessorSpec
+    from aircraft_docking_tracker.ros.processing import ProcessorSpec
 
     class SpecNode(PerceptionNode):
         def __init__(self, **kwargs):
@@ -184,7 +184,7 @@ def test_image_qos_is_best_effort_and_overridable_to_reliable_by_the_standard_pa
 def test_latency_is_reported_for_live_stamps_and_explained_for_stamps_on_another_clock():
     """Stamp-to-output latency on the node's clock; a bag replayed without use_sim_time (stamps hours
     old) or a camera clock ahead gives no latency figure but the offset, instead of 1e11 ms."""
-    from aircraft_docking_tracker.node_base import _latency_text
+    from aircraft_docking_tracker.ros.node_base import _latency_text
 
     def median_latency(stamp_age_s: float) -> tuple[dict, str]:
         stats, now_ns = ProcessingStats(), 5_000_000_000_000

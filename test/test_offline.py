@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 from std_msgs.msg import String
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
 from aircraft_docking_tracker.images import numpy_to_image, to_mono8
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
 from aircraft_docking_tracker.offline import OfflineRun, run
-from aircraft_docking_tracker.processing import MessageProcessor
+from aircraft_docking_tracker.ros.processing import MessageProcessor
 
 
 class BrightSpotDetector(MessageProcessor):

@@ -56,15 +56,29 @@ def test_package_xml_declares_every_ros_package_the_code_imports():
 
 
 def test_algorithm_cores_import_no_ros():
-    cores = ["affine_group", "appearance", "ispf", "docking"]
+    shared = ["geometry"]    # config, object_table and images reach ROS packages inside functions
     mt_cores = ["features", "cascade", "detector", "kalman", "association"]
-    paths = [REPO / "aircraft_docking_tracker" / f"{c}.py" for c in cores]
+    paths = sorted((REPO / "aircraft_docking_tracker" / "docking").glob("*.py"))
+    paths += [REPO / "aircraft_docking_tracker" / f"{c}.py" for c in shared]
     paths += [REPO / "multi_target_tracker" / f"{c}.py" for c in mt_cores]
     paths += list((REPO / "aircraft_docking_tracker" / "evaluation").glob("*_metrics.py"))
     for path in paths:
         text = path.read_text()
         bad = [m.group(1) for m in re.finditer(r"^\s*(?:from|import)\s+([a-z_]+)", text, flags=re.M) if m.group(1) in ROS_PACKAGES]
         assert not bad, f"{path.name} imports ROS: {bad}"
+
+
+def test_docking_cores_import_only_shared_helpers():
+    """The docking cores depend on the small shared helpers (config, geometry, tables) and on each other,
+    never on the ROS layer, the files, the evaluation, the scenarios or a tool."""
+    allowed = {"docking", "config", "geometry", "object_table", "images"}
+    for path in sorted((REPO / "aircraft_docking_tracker" / "docking").glob("*.py")):
+        text = path.read_text()
+        relative = re.findall(r"^\s*from (\.+)(\w*)", text, flags=re.M)
+        absolute = re.findall(r"^\s*(?:from|import) aircraft_docking_tracker\.(\w+)", text, flags=re.M)
+        used = {name or "docking" for dots, name in relative if dots == ".."} | set(absolute)
+        used |= {"docking" for dots, _ in relative if dots == "."}
+        assert used <= allowed, f"{path.name} imports {sorted(used - allowed)}"
 
 
 @pytest.mark.slow

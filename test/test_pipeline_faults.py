@@ -6,7 +6,7 @@ detections with a varying number of bad rows, adds one key per distinct number: 
 the node's memory, grow without bound over a long run, and the top-3 reasons in /diagnostics
 become one kind split many ways. ``processing.reason_key`` promises "counted by kind".
 """
-from aircraft_docking_tracker.processing import MessageProcessor, ProcessingStats, process_guarded
+from aircraft_docking_tracker.ros.processing import MessageProcessor, ProcessingStats, process_guarded
 
 
 class _Refuses(MessageProcessor):

@@ -3,8 +3,8 @@ scored against the bags' ground truth; live outputs equal the offline runner's."
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker.bag import BagReader
-from aircraft_docking_tracker.docking import DockingConfig
+from aircraft_docking_tracker.io.bag import BagReader
+from aircraft_docking_tracker.docking.tracker import DockingConfig
 from aircraft_docking_tracker.docking_tracker_node import DockingTrackerNode
 from aircraft_docking_tracker.evaluation.evaluate import EvaluateConfig, evaluate_bags
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table

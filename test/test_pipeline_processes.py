@@ -5,7 +5,7 @@ import time
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker.bag import BagReader
+from aircraft_docking_tracker.io.bag import BagReader
 from aircraft_docking_tracker.config import package_config_dir
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table
 from aircraft_docking_tracker.offline import run

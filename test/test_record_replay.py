@@ -10,10 +10,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import String
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
 from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
-from aircraft_docking_tracker.mcap_play import Player, PlayOptions
-from aircraft_docking_tracker.mcap_record import Recorder
+from aircraft_docking_tracker.io.mcap_play import Player, PlayOptions
+from aircraft_docking_tracker.io.mcap_record import Recorder
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
 
 from ros_helpers import ros_context, spin_until, wait_for_subscribers, write_with_rosbags
@@ -130,6 +130,6 @@ def test_cli_errors_are_clear_and_do_not_trace(tmp_path, content, message):
     path = tmp_path / "bad.mcap"
     if content is not None:
         path.write_bytes(content)
-    result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.mcap_play", str(path)],
+    result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.io.mcap_play", str(path)],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr

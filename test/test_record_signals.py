@@ -10,7 +10,7 @@ import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from aircraft_docking_tracker.bag import BagReader, recover
+from aircraft_docking_tracker.io.bag import BagReader, recover
 
 from ros_helpers import ros_context, spin_until
 

@@ -14,8 +14,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from aircraft_docking_tracker.bag import BagReader, BagWriter, ns_to_stamp
-from aircraft_docking_tracker.mcap_record import Recorder
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.io.mcap_record import Recorder
 
 from ros_helpers import ros_context, spin_until, wait_for_subscribers
 
@@ -71,7 +71,7 @@ def test_recorder_cli_splits_by_duration(tmp_path):
     )
     talker = subprocess.Popen([sys.executable, "-c", script])  # publishes until stopped
     try:
-        result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.mcap_record", "split_chatter",
+        result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.io.mcap_record", "split_chatter",
                                  "-o", str(out), "--max-bag-duration", "1", "--max-duration", "6"],
                                 capture_output=True, text=True, timeout=60)
     finally:
@@ -89,7 +89,7 @@ def test_recorder_cli_splits_by_duration(tmp_path):
 
 
 def test_split_options_need_a_directory_output(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.mcap_record", "-a",
+    result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.io.mcap_record", "-a",
                              "-o", str(tmp_path / "x.mcap"), "--max-bag-size", "1000000"],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "bag directory" in result.stderr and "Traceback" not in result.stderr

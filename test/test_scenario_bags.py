@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker.bag import BagReader
+from aircraft_docking_tracker.io.bag import BagReader
 from aircraft_docking_tracker.evaluation import evaluate as ev
 from aircraft_docking_tracker.images import to_bgr8
 from aircraft_docking_tracker.object_table import cloud_to_table

@@ -15,11 +15,12 @@ import pytest
 import yaml
 from std_msgs.msg import String
 
-from aircraft_docking_tracker import affine_group as ag
-from aircraft_docking_tracker import mcap_record, offline, sot_track
-from aircraft_docking_tracker.bag import BagError, BagReader, BagWriter, check_outputs
+from aircraft_docking_tracker.docking import affine_group as ag
+from aircraft_docking_tracker.io import mcap_record
+from aircraft_docking_tracker import offline, sot_track
+from aircraft_docking_tracker.io.bag import BagError, BagReader, BagWriter, check_outputs
 from aircraft_docking_tracker.images import numpy_to_image
-from aircraft_docking_tracker.mcap_play import Player, PlayOptions
+from aircraft_docking_tracker.io.mcap_play import Player, PlayOptions
 from aircraft_docking_tracker.scenarios.messages import header, quad_to_polygon
 from multi_target_tracker import detect
 
@@ -259,7 +260,7 @@ def test_the_player_names_the_repair_of_a_truncated_recording(tmp_path):
     import sys
 
     cut = killed_copy(chatter_bag(tmp_path / "full.mcap", n=200, chunk_size=500), tmp_path / "killed.mcap")
-    result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.mcap_play", str(cut), "--rate", "100"],
+    result = subprocess.run([sys.executable, "-m", "aircraft_docking_tracker.io.mcap_play", str(cut), "--rate", "100"],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert "truncated" in result.stderr and "mcap_record --recover" in result.stderr

@@ -116,7 +116,7 @@ def run_live(bags: dict[str, Path], out: Path, rate: float) -> Path:
 
 def first_box(bag: Path) -> list[float]:
     """The axis-aligned box of the first ground-truth polygon: what an operator would mark."""
-    from aircraft_docking_tracker.bag import BagReader
+    from aircraft_docking_tracker.io.bag import BagReader
 
     for _, msg, _ in BagReader(bag).ros_messages(["ground_truth/polygon"]):
         xs, ys = [p.x for p in msg.polygon.points], [p.y for p in msg.polygon.points]
@@ -126,7 +126,7 @@ def first_box(bag: Path) -> list[float]:
 
 def diagnostics_summary(recording: Path) -> dict:
     """The last /diagnostics status of every node: processed, skipped, rejected."""
-    from aircraft_docking_tracker.bag import BagReader
+    from aircraft_docking_tracker.io.bag import BagReader
 
     last = {}
     for _, msg, _ in BagReader(recording).ros_messages(["/diagnostics"]):

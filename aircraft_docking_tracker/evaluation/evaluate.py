@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from aircraft_docking_tracker.bag import BagReader
+from aircraft_docking_tracker.io.bag import BagReader
 from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments, param, validate
 from aircraft_docking_tracker.evaluation import plots, report
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, DetectionMetricsConfig
@@ -50,7 +50,7 @@ from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table, t
 from aircraft_docking_tracker.scenarios.datasets import mot_rows_to_tracks, read_results_regions, read_sot_boxes
 from aircraft_docking_tracker.scenarios.messages import (DETECTIONS, DOCKING_POLYGON, GROUND_TRUTH, GT_NOSE,
                                                         GT_POLYGON, GT_STAND, IMAGE, TRACKS, polygon_to_quad)
-from aircraft_docking_tracker import motchallenge
+from aircraft_docking_tracker.io import motchallenge
 
 OUTPUT_TOPICS = (DOCKING_POLYGON, TRACKS, DETECTIONS)
 

@@ -24,7 +24,7 @@ import motmetrics
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from aircraft_docking_tracker.motchallenge import boxes, frames, iou_matrix
+from aircraft_docking_tracker.io.motchallenge import boxes, frames, iou_matrix
 
 _METRICS = ["num_frames", "mota", "motp", "idf1", "idp", "idr", "precision", "recall",
             "num_switches", "num_fragmentations", "mostly_tracked", "partially_tracked", "mostly_lost",

@@ -24,14 +24,14 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from aircraft_docking_tracker.bag import BagWriter
+from aircraft_docking_tracker.io.bag import BagWriter
 from aircraft_docking_tracker.geometry import box_to_quad
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from aircraft_docking_tracker.scenarios import datasets
 from aircraft_docking_tracker.scenarios import messages as m
 from aircraft_docking_tracker.scenarios.datasets import DatasetError
 from aircraft_docking_tracker.scenarios.render import frame_stamp_ns
-from aircraft_docking_tracker import motchallenge
+from aircraft_docking_tracker.io import motchallenge
 
 DEFAULT_FPS = {"sot": 30.0, "mot": 25.0, "detect": 10.0}
 

@@ -8,7 +8,7 @@ Conventions of the files, and what they become here (0-based pixels, top-left co
   (TLP gives no base; its boxes are read as 0-based) and frames with ``lost = 1`` become NaN
   (target absent: not scored);
 * YOLO ``labels/*.txt``: ``class cx cy w h`` normalised to the image -> pixel boxes;
-* MOTChallenge files are read by ``aircraft_docking_tracker.motchallenge`` (the one reader of them).
+* MOTChallenge files are read by ``aircraft_docking_tracker.io.motchallenge`` (the one reader of them).
 """
 from __future__ import annotations
 

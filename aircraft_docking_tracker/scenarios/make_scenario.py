@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from aircraft_docking_tracker.bag import BagWriter
+from aircraft_docking_tracker.io.bag import BagWriter
 from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments
 from aircraft_docking_tracker.scenarios import messages as m
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig

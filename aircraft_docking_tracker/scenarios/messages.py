@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aircraft_docking_tracker.bag import ns_to_stamp, stamp_to_ns
+from aircraft_docking_tracker.io.bag import ns_to_stamp, stamp_to_ns
 from aircraft_docking_tracker.images import numpy_to_image
 from aircraft_docking_tracker.object_table import table_to_cloud
 

@@ -17,9 +17,9 @@ import traceback
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from .bag import stamp_to_ns
-from .config import param
-from .images import MAX_PIXELS
+from ..io.bag import stamp_to_ns
+from ..config import param
+from ..images import MAX_PIXELS
 
 LOG = logging.getLogger(__name__)
 
@@ -283,7 +283,7 @@ class ProcessorSpec:
 
     def configs_from_parameters(self, parameters: dict[str, Any]) -> dict[str, Any]:
         """Validated configs from a flat parameter dict (``load_yaml_parameters`` output)."""
-        from .config import from_mapping  # noqa: PLC0415
+        from ..config import from_mapping  # noqa: PLC0415
 
         out = {}
         for prefix, cls in self.configs.items():

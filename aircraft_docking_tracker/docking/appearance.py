@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import param
+from ..config import param
 
 
 class AppearanceError(ValueError):

@@ -30,7 +30,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .geometry import quad_to_box
+from ..geometry import quad_to_box
 
 #: Lie algebra basis E1..E6 (seed eq. 5): scale, aspect, rotation, skew, x, y.
 BASIS = np.array([

@@ -97,7 +97,7 @@ import numpy as np
 
 from . import affine_group as ag
 from .appearance import AppearanceConfig, ObservationModel, PoseEstimator
-from .config import ConfigError, param
+from ..config import ConfigError, param
 from .static_background import StaticBackground, foreground_extent
 
 

@@ -53,8 +53,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
-from . import config as config_module
-from .bag import get_message_class
+from .. import config as config_module
+from ..io.bag import get_message_class
 from .processing import (ERROR, MAX_REASONS, OK, OTHER_REASONS, WARN, MessageProcessor, ProcessingStats, reason_key,
                          process_guarded)
 
@@ -507,7 +507,7 @@ def run_node(node_class: type, args: list[str] | None = None, **node_kwargs) -> 
     worker starved the process (bench/foundation.py: 304 of 650 replayed messages delivered,
     p50 3.2 s late, against 650 of 650 at p95 1.3 ms single-threaded).
     """
-    from .cli import split_ros_args  # noqa: PLC0415
+    from ..cli import split_ros_args  # noqa: PLC0415
 
     argv = list(sys.argv if args is None else args)
     prog = (argv[0].rsplit("/", 1)[-1] if argv else "") or node_class.__name__

@@ -18,8 +18,8 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from .geometry import box_iou
-from .object_table import table_boxes as boxes  # noqa: F401 (MOT rows: x, y, w, h)
+from ..geometry import box_iou
+from ..object_table import table_boxes as boxes  # noqa: F401 (MOT rows: x, y, w, h)
 
 #: One MOTChallenge row. ``cls`` and ``visibility`` are -1 where the file does not give them.
 MOT_ROW_DTYPE = np.dtype([

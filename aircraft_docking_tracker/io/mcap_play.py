@@ -20,7 +20,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from .cli import split_ros_args
+from ..cli import split_ros_args
 from .bag import BagError, BagReader, get_message_class, ns_to_stamp
 
 

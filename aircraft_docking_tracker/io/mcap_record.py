@@ -28,7 +28,7 @@ import sys
 import threading
 import time
 
-from .cli import split_ros_args
+from ..cli import split_ros_args
 from .bag import BagError, BagWriter, get_message_class, qos_to_dict, recover
 
 MAX_PENDING = 10_000  # messages held while a use_sim_time recorder waits for its first /clock

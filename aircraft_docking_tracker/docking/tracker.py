@@ -30,10 +30,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import affine_group as ag
-from .config import ConfigError, param
-from .geometry import box_iou
+from ..config import ConfigError, param
+from ..geometry import box_iou
 from .ispf import FilterConfig, make_filter
-from .object_table import table_boxes
+from ..object_table import table_boxes
 
 TRACKING, LOST, WAITING = 0, 1, 2
 STATE_NAMES = {TRACKING: "tracking", LOST: "lost", WAITING: "waiting"}

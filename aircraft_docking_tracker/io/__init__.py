@@ -1,0 +1,1 @@
+"""Files: rosbag2-compatible MCAP bags (read, write, record, play) and MOTChallenge text files."""
