@@ -47,3 +47,9 @@ def quad_to_box(quads) -> np.ndarray:
         raise ValueError(f"quadrilaterals must be (..., 4, 2) point arrays, got shape {q.shape}")
     lo, hi = q.min(axis=-2), q.max(axis=-2)
     return np.concatenate([lo, hi - lo], axis=-1)
+
+
+def scale_boxes(boxes, factor: float) -> np.ndarray:
+    """``(n, 4)`` boxes x, y, w, h scaled about their centres by ``factor``."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    return np.column_stack([boxes[:, :2] + (1 - factor) * boxes[:, 2:] / 2, boxes[:, 2:] * factor])

@@ -52,11 +52,12 @@ sys.path.insert(0, str(REPO))
 from aircraft_docking_tracker.config import from_mapping, package_config_dir  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, detection_summary  # noqa: E402
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
+from aircraft_docking_tracker.geometry import scale_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
 from multi_target_tracker.detector import Detector, DetectorConfig, group_stats, suppress_contained  # noqa: E402
-from multi_target_tracker.verifier import colour_features, group_features  # noqa: E402
+from multi_target_tracker.verifier import features  # noqa: E402
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
 
 SETUP = "uav_camera.yaml"
@@ -145,15 +146,12 @@ def group_confidences(det: Detector, image: np.ndarray) -> tuple[np.ndarray, dic
     ``detect`` scales them) and each confidence of :data:`CONFIDENCES` per group."""
     cfg = det.config
     group_boxes, counts, margin_sums, best = group_stats(*det.raw(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)),
-                                                         cfg.group_iou, cfg.window_margin)
-    big = counts >= VERIFIER_MIN_WINDOWS
-    group_boxes, counts, margin_sums, best = group_boxes[big], counts[big], margin_sums[big], best[big]
+                                                         cfg.group_iou, cfg.window_margin,
+                                                         min_count=VERIFIER_MIN_WINDOWS)
     confidences = {"count": counts + expit(best), "margin_sum": margin_sums, "best_margin": best}
     if det.verifier is not None:
-        confidences["verifier"] = det.verifier.logit(np.hstack([colour_features(image, group_boxes),
-                                                                group_features(counts, margin_sums, best)]))
-    k = cfg.box_scale
-    return np.column_stack([group_boxes[:, :2] + (1 - k) * group_boxes[:, 2:] / 2, group_boxes[:, 2:] * k]), confidences
+        confidences["verifier"] = det.verifier.logit(features(image, group_boxes, counts, margin_sums, best))
+    return scale_boxes(group_boxes, cfg.box_scale), confidences
 
 
 def confidence_runs(det: Detector, seeds: list[tuple[int, int]]) -> dict:

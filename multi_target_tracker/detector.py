@@ -46,11 +46,11 @@ import numpy as np
 from scipy.special import expit
 
 from aircraft_docking_tracker.config import ConfigError, param
-from aircraft_docking_tracker.geometry import box_to_quad
+from aircraft_docking_tracker.geometry import box_to_quad, scale_boxes
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
-from multi_target_tracker.verifier import Verifier, VerifierError, colour_features, group_features
+from multi_target_tracker.verifier import Verifier, VerifierError, features
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_MODEL = "drone_vehicles_fused.json"
@@ -370,10 +370,11 @@ def group_members(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     return boxes, margins, label, seeds
 
 
-def group_stats(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, margin_floor: float = 0.0):
-    """Every group of :func:`group_members` (none dropped): ``(boxes, counts, margin_sums, best_margins)`` with the
-    mean box of each group, its number of windows, its members' margins above ``margin_floor`` summed (OpenCV's
-    level weights) and its best member's margin."""
+def group_stats(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, margin_floor: float = 0.0,
+                min_count: int = 1):
+    """The groups of :func:`group_members` of at least ``min_count`` windows: ``(boxes, counts, margin_sums,
+    best_margins)`` with the mean box of each group, its number of windows, its members' margins above
+    ``margin_floor`` summed (OpenCV's level weights) and its best member's margin."""
     boxes, margins, label, seeds = group_members(boxes, margins, group_iou)
     if len(seeds) == 0:
         return np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
@@ -381,7 +382,8 @@ def group_stats(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, 
     sums = np.zeros((len(seeds), 4))
     np.add.at(sums, label, boxes)          # members in window order, as a per-group mean adds them
     margin_sums = np.bincount(label, weights=margins - margin_floor, minlength=len(seeds))
-    return sums / counts[:, None], counts, margin_sums, margins[seeds]
+    big = counts >= min_count
+    return sums[big] / counts[big, None], counts[big], margin_sums[big], margins[seeds[big]]
 
 
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
@@ -391,11 +393,10 @@ def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     See the module docstring: mean box per group, score = windows in the group + logistic of the best
     margin, groups smaller than ``min_neighbors`` dropped, contained groups suppressed.
     """
-    group_boxes, counts, _, best = group_stats(boxes, margins, group_iou)
-    big = counts >= min_neighbors
-    if not big.any():
+    group_boxes, counts, _, best = group_stats(boxes, margins, group_iou, min_count=min_neighbors)
+    if len(counts) == 0:
         return np.zeros((0, 4)), np.zeros(0)
-    group_boxes, group_scores = group_boxes[big], counts[big] + expit(best[big])
+    group_scores = counts + expit(best)
     keep = suppress_contained(group_boxes, group_scores, containment, max_detections)
     return group_boxes[keep], group_scores[keep]
 
@@ -486,20 +487,18 @@ class Detector:
             keep = suppress_contained(boxes, scores, cfg.containment, cfg.max_detections)
             boxes, scores = boxes[keep], scores[keep]
         out = np.zeros(len(boxes), DETECTION_DTYPE)
-        k = cfg.box_scale
-        out["x"], out["y"] = boxes[:, 0] + (1 - k) * boxes[:, 2] / 2 + x0, boxes[:, 1] + (1 - k) * boxes[:, 3] / 2 + y0
-        out["w"], out["h"] = boxes[:, 2] * k, boxes[:, 3] * k
+        scaled = scale_boxes(boxes, cfg.box_scale)
+        out["x"], out["y"] = scaled[:, 0] + x0, scaled[:, 1] + y0
+        out["w"], out["h"] = scaled[:, 2], scaled[:, 3]
         out["score"], out["class_id"] = scores, cfg.class_id
         return out
 
     def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
         """Groups of at least ``min_neighbors`` windows that the colour verifier accepts, scored by its probability."""
         cfg = self.config
-        group_boxes, counts, margin_sums, best = group_stats(boxes, margins, cfg.group_iou, margin_floor)
-        big = counts >= cfg.min_neighbors
-        group_boxes, counts, margin_sums, best = group_boxes[big], counts[big], margin_sums[big], best[big]
-        logit = self.verifier.logit(np.hstack([colour_features(bgr, group_boxes),
-                                               group_features(counts, margin_sums, best)]))
+        group_boxes, counts, margin_sums, best = group_stats(boxes, margins, cfg.group_iou, margin_floor,
+                                                             min_count=cfg.min_neighbors)
+        logit = self.verifier.logit(features(bgr, group_boxes, counts, margin_sums, best))
         accepted = logit >= cfg.verifier_threshold
         group_boxes, scores = group_boxes[accepted], expit(logit[accepted])
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)

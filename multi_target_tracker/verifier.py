@@ -65,6 +65,12 @@ def group_features(counts: np.ndarray, margin_sums: np.ndarray, best_margins: np
                             np.asarray(best_margins, np.float64)]).reshape(-1, len(GROUP_FEATURES))
 
 
+def features(bgr: np.ndarray, boxes: np.ndarray, counts: np.ndarray, margin_sums: np.ndarray,
+             best_margins: np.ndarray) -> np.ndarray:
+    """``(n, len(FEATURES))``: each group's colour statistics in ``bgr`` beside its cascade evidence."""
+    return np.hstack([colour_features(bgr, boxes), group_features(counts, margin_sums, best_margins)])
+
+
 @dataclass
 class Verifier:
     """A logistic regression over :data:`FEATURES`: standardisation, weights, bias."""

@@ -24,6 +24,8 @@ def test_group_stats_counts_and_sums_the_windows_of_each_group():
     assert sums[big] == pytest.approx((margins[:6] - 0.5).sum()) and best[big] == 2.0
     assert sums[1 - big] == pytest.approx(2.5) and best[1 - big] == 3.0     # the lone window's own margin
     assert np.allclose(group_boxes[big], cluster.mean(axis=0))
+    only_big = group_stats(boxes, margins, 0.3, margin_floor=0.5, min_count=2)
+    assert only_big[1].tolist() == [6] and np.allclose(only_big[0][0], group_boxes[big])
     grouped, scores = group_windows(boxes, margins, 0.3, min_neighbors=2, containment=1.0)
     assert len(grouped) == 1 and np.allclose(grouped[0], group_boxes[big]) and 6 < scores[0] < 7
 

@@ -150,3 +150,11 @@ def test_geometry_boxes_and_quadrilaterals_broadcast_and_refuse_wrong_shapes():
         geometry.box_to_quad(np.zeros((2, 8)))
     with pytest.raises(ValueError):
         geometry.quad_to_box(np.zeros((3, 2)))
+
+
+def test_geometry_scale_boxes_keeps_the_centre():
+    boxes = np.array([[10, 20, 40, 20], [0, 0, 1, 1]], float)
+    scaled = geometry.scale_boxes(boxes, 0.5)
+    np.testing.assert_allclose(scaled, [[20, 25, 20, 10], [0.25, 0.25, 0.5, 0.5]])
+    np.testing.assert_allclose(scaled[:, :2] + scaled[:, 2:] / 2, boxes[:, :2] + boxes[:, 2:] / 2)
+    np.testing.assert_allclose(geometry.scale_boxes(boxes, 1.0), boxes)

@@ -29,12 +29,12 @@ sys.path.insert(0, str(REPO))
 
 from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
-from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
+from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
 from multi_target_tracker.detector import MODELS_DIR, Detector, group_stats  # noqa: E402
-from multi_target_tracker.verifier import colour_features, fit_verifier, group_features  # noqa: E402
+from multi_target_tracker.verifier import features, fit_verifier  # noqa: E402
 
 SETUP = "uav_camera.yaml"
 
@@ -58,25 +58,24 @@ def cascade_detector(overrides: dict | None = None) -> Detector:
 
 def samples(det: Detector, seeds, min_windows: int) -> tuple[np.ndarray, np.ndarray]:
     """Verifier features and labels of the groups of ``seeds`` (see the module docstring)."""
-    cfg, k = det.config, det.config.box_scale
-    features, labels = [], []
+    cfg = det.config
+    rows, labels = [], []
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, 8):
             boxes, margins = det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
-            group_boxes, counts, sums, best = group_stats(boxes, margins, cfg.group_iou, cfg.window_margin)
-            big = counts >= min_windows
-            group_boxes, counts, sums, best = group_boxes[big], counts[big], sums[big], best[big]
+            group_boxes, counts, sums, best = group_stats(boxes, margins, cfg.group_iou, cfg.window_margin,
+                                                          min_count=min_windows)
             if not len(group_boxes):
                 continue
-            scaled = np.column_stack([group_boxes[:, :2] + (1 - k) * group_boxes[:, 2:] / 2, group_boxes[:, 2:] * k])
+            scaled = scale_boxes(group_boxes, cfg.box_scale)
             iou_counted = (box_iou(scaled[:, None], truth[~ignore][None]).max(axis=1) if (~ignore).any()
                            else np.zeros(len(scaled)))
             iou_any = box_iou(scaled[:, None], truth[None]).max(axis=1) if len(truth) else np.zeros(len(scaled))
             clear = (iou_counted >= 0.5) | (iou_any < 0.3)
-            features.append(np.hstack([colour_features(bgr, group_boxes), group_features(counts, sums, best)])[clear])
+            rows.append(features(bgr, group_boxes, counts, sums, best)[clear])
             labels.append(iou_counted[clear] >= 0.5)
         print(f"training seed {seed}: {sum(len(v) for v in labels)} groups so far", flush=True)
-    return np.vstack(features), np.concatenate(labels)
+    return np.vstack(rows), np.concatenate(labels)
 
 
 def operating_point(det: Detector, seeds, min_neighbors: list[int]) -> dict:
@@ -90,9 +89,7 @@ def operating_point(det: Detector, seeds, min_neighbors: list[int]) -> dict:
         acc = DetectionAccumulator()
         for bgr, truth, ignore, (boxes, margins) in frames:
             group_boxes, probability = det._verified(bgr, boxes, margins, cfg.window_margin)
-            k = cfg.box_scale
-            scaled = np.column_stack([group_boxes[:, :2] + (1 - k) * group_boxes[:, 2:] / 2, group_boxes[:, 2:] * k])
-            acc.add_frame(scaled, probability, truth, ignore)
+            acc.add_frame(scale_boxes(group_boxes, cfg.box_scale), probability, truth, ignore)
         s = acc.summary()
         recall, precision, score = (np.asarray(s[key]) for key in ("pr_recall", "pr_precision", "pr_score"))
         j = int(np.argmax(recall - (1 - precision)))
