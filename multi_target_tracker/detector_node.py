@@ -96,9 +96,11 @@ class DetectorProcessor(MessageProcessor):
             self.passed_over += 1
             return []
         limit = self.node.max_image_pixels
-        colour = self.node.annotate_image or self.detector.needs_colour      # the colour verifier reads BGR
-        bgr = to_bgr8(msg, limit) if colour else None
-        image = bgr if self.detector.needs_colour else to_mono8(msg, limit) if bgr is None else _gray(bgr)
+        if self.node.annotate_image or self.detector.needs_colour:             # the colour verifier reads BGR
+            bgr = to_bgr8(msg, limit)
+            image = bgr if self.detector.needs_colour else _gray(bgr)
+        else:
+            bgr, image = None, to_mono8(msg, limit)
         table = self.detector.detect(image)
         self.last_count = len(table)
         out = [("detections", table_to_cloud(table, msg.header)),
