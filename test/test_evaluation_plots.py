@@ -6,6 +6,7 @@ import numpy as np
 from aircraft_docking_tracker.evaluation import plots
 from aircraft_docking_tracker.evaluation.detection_metrics import detection_summary
 from aircraft_docking_tracker.evaluation.sot_metrics import score_sequence
+from aircraft_docking_tracker.scenarios import strips
 
 
 def test_sot_plots_with_a_lost_run(tmp_path):
@@ -27,6 +28,6 @@ def test_detection_and_mot_plots(tmp_path):
 
 def test_strip_of_plain_images(tmp_path):
     images = [np.full((48, 64, 3), v, np.uint8) for v in (0, 128, 255)]
-    strip = plots.strip_image(images, tile_width=32)
+    strip = strips.strip_image(images, tile_width=32)
     assert strip.shape == (24, 3 * 34, 3)
-    assert plots.frame_strip(images, tmp_path / "s.png").exists()
+    assert strips.frame_strip(images, tmp_path / "s.png").exists()

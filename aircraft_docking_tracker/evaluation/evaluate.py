@@ -47,6 +47,7 @@ from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from aircraft_docking_tracker.evaluation.speed import latency_percentiles, stream_fps
 from aircraft_docking_tracker.images import to_bgr8
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table, table_boxes
+from aircraft_docking_tracker.scenarios import strips
 from aircraft_docking_tracker.scenarios.datasets import mot_rows_to_tracks, read_results_regions, read_sot_boxes
 from aircraft_docking_tracker.scenarios.messages import (DETECTIONS, DOCKING_POLYGON, GROUND_TRUTH, GT_NOSE,
                                                         GT_POLYGON, GT_STAND, IMAGE, TRACKS, polygon_to_quad)
@@ -440,8 +441,8 @@ def annotated_frames(output_bag: str | Path, gt_bag: str | Path | None = None, c
     wanted = set(np.linspace(0, n - 1, min(count, n)).astype(int).tolist()) if count else None
     outs = read_streams(output_bag, (DOCKING_POLYGON, TRACKS, DETECTIONS), namespace=namespace)
     gts = read_streams(gt_bag or output_bag, (GT_POLYGON, GROUND_TRUTH), namespace=namespace)
-    drawn = ((gts, plots.GT_COLOR, GT_POLYGON, GROUND_TRUTH),
-             (outs, plots.RESULT_COLOR, DOCKING_POLYGON, TRACKS if TRACKS in outs else DETECTIONS))
+    drawn = ((gts, strips.GT_COLOR, GT_POLYGON, GROUND_TRUTH),
+             (outs, strips.RESULT_COLOR, DOCKING_POLYGON, TRACKS if TRACKS in outs else DETECTIONS))
     for k, item in enumerate(reader.messages([image_topic])):
         if wanted is not None and k not in wanted:
             continue
@@ -454,7 +455,7 @@ def annotated_frames(output_bag: str | Path, gt_bag: str | Path | None = None, c
                 if table_topic in streams and stamp in streams[table_topic].values else None
             labels = table["id"].tolist() if table is not None and "id" in table.dtype.names else None
             hidden = hidden_rows(table, EvaluateConfig()) if table is not None and streams is gts else None
-            image = plots.draw_annotations(image, quads=quads, boxes=table_boxes(table) if table is not None else (),
+            image = strips.draw_annotations(image, quads=quads, boxes=table_boxes(table) if table is not None else (),
                                            color=color, labels=labels, hidden=hidden)
         yield k, image
 
@@ -463,7 +464,7 @@ def write_strip(output_bag: str | Path, gt_bag: str | Path | None, path: str | P
                 namespace: str = ""):
     """Six (``count``) annotated frames side by side as a PNG; None when there are no images."""
     frames = list(annotated_frames(output_bag, gt_bag, count, namespace))
-    return plots.frame_strip([f[1] for f in frames], path, numbers=[f[0] for f in frames]) if frames else None
+    return strips.frame_strip([f[1] for f in frames], path, numbers=[f[0] for f in frames]) if frames else None
 
 
 def write_video(output_bag: str | Path, gt_bag: str | Path | None, path: str | Path, namespace: str = "",

@@ -21,6 +21,7 @@ from aircraft_docking_tracker.io.bag import BagWriter
 from aircraft_docking_tracker.config import ConfigError, add_config_arguments, config_from_arguments
 from aircraft_docking_tracker.scenarios import messages as m
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
+from aircraft_docking_tracker.scenarios.strips import frame_strip
 from aircraft_docking_tracker.scenarios.uav import UavScene, UavSceneConfig, synthesize_detections
 
 
@@ -91,7 +92,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from aircraft_docking_tracker.evaluation.plots import frame_strip  # noqa: PLC0415 (matplotlib-free)
 
     try:
         if args.kind == "docking":

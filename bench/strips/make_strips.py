@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aircraft_docking_tracker.evaluation.plots import strip_image, write_image
+from aircraft_docking_tracker.scenarios.strips import strip_image, write_image
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
 from aircraft_docking_tracker.scenarios.uav import UavScene, UavSceneConfig
 
