@@ -50,6 +50,7 @@ from aircraft_docking_tracker.geometry import box_to_quad, scale_boxes
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
+from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
 from multi_target_tracker.verifier import Verifier, VerifierError, features
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -98,6 +99,10 @@ class DetectorConfig:
                           "probability; needs colour images and the cascade backend (the UAV set-up's)")
     verifier_threshold: float = param(0.0, "log odds a group needs from the verifier to be a detection (chosen on "
                                       "tuning scenes)", low=-50.0, high=50.0)
+    box_regressor: str = param("", "box regressor of the verified groups (JSON model; a bare name is looked up in "
+                               "multi_target_tracker/models; empty: none): moves each edge of a group's mean box by "
+                               "an offset predicted from its member windows, before containment and box_scale; needs "
+                               "the verifier (the UAV set-up's)")
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -123,6 +128,8 @@ class DetectorConfig:
             raise ConfigError("angles other than 0 need the cascade backend", ("angles", "backend"))
         if self.verifier and self.backend != "cascade":
             raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
+        if self.box_regressor and not self.verifier:
+            raise ConfigError("a box regressor needs the verifier", ("box_regressor", "verifier"))
         if self.min_size > 0 and self.max_size > 0 and self.min_size > self.max_size:
             raise ConfigError(f"min_size={self.min_size} must not exceed max_size={self.max_size}",
                               ("min_size", "max_size"))
@@ -135,6 +142,10 @@ class DetectorConfig:
             load_verifier(self)
         except (DetectorError, VerifierError) as exc:
             raise ConfigError(f"verifier {self.verifier!r}: {exc}", ("verifier",)) from None
+        try:
+            load_box_regressor(self)
+        except (DetectorError, BoxRegressorError) as exc:
+            raise ConfigError(f"box regressor {self.box_regressor!r}: {exc}", ("box_regressor",)) from None
 
 
 def resolve_model(name: str) -> Path:
@@ -188,6 +199,13 @@ def load_verifier(cfg: DetectorConfig) -> Verifier | None:
     if not cfg.verifier:
         return None
     return Verifier.load(resolve_model(cfg.verifier))
+
+
+def load_box_regressor(cfg: DetectorConfig) -> BoxRegressor | None:
+    """The box regressor of ``cfg`` (None when ``cfg.box_regressor`` is empty)."""
+    if not cfg.box_regressor:
+        return None
+    return BoxRegressor.load(resolve_model(cfg.box_regressor))
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -375,15 +393,21 @@ def group_stats(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, 
     """The groups of :func:`group_members` of at least ``min_count`` windows: ``(boxes, counts, margin_sums,
     best_margins)`` with the mean box of each group, its number of windows, its members' margins above
     ``margin_floor`` summed (OpenCV's level weights) and its best member's margin."""
-    boxes, margins, label, seeds = group_members(boxes, margins, group_iou)
+    return members_stats(*group_members(boxes, margins, group_iou), margin_floor, min_count)[1:]
+
+
+def members_stats(boxes: np.ndarray, margins: np.ndarray, label: np.ndarray, seeds: np.ndarray,
+                  margin_floor: float = 0.0, min_count: int = 1):
+    """:func:`group_stats` from :func:`group_members`' output, with the labels of the groups kept first:
+    ``(kept labels, boxes, counts, margin_sums, best_margins)``."""
     if len(seeds) == 0:
-        return np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
     counts = np.bincount(label, minlength=len(seeds))
     sums = np.zeros((len(seeds), 4))
     np.add.at(sums, label, boxes)          # members in window order, as a per-group mean adds them
     margin_sums = np.bincount(label, weights=margins - margin_floor, minlength=len(seeds))
     big = counts >= min_count
-    return sums[big] / counts[big, None], counts[big], margin_sums[big], margins[seeds[big]]
+    return np.flatnonzero(big), sums[big] / counts[big, None], counts[big], margin_sums[big], margins[seeds[big]]
 
 
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
@@ -424,7 +448,8 @@ class Detector:
         self.pool = ThreadPoolExecutor(cfg.threads, "detector") if cfg.threads > 1 else None
         try:
             self.verifier = load_verifier(cfg) if self.cascade is not None else None
-        except VerifierError as exc:
+            self.box_regressor = load_box_regressor(cfg) if self.verifier is not None else None
+        except (VerifierError, BoxRegressorError) as exc:
             raise DetectorError(str(exc)) from None
 
     @property
@@ -494,12 +519,17 @@ class Detector:
         return out
 
     def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
-        """Groups of at least ``min_neighbors`` windows that the colour verifier accepts, scored by its probability."""
+        """Groups of at least ``min_neighbors`` windows that the colour verifier accepts, scored by its probability,
+        their boxes refined by the box regressor if one is configured."""
         cfg = self.config
-        group_boxes, counts, margin_sums, best = group_stats(boxes, margins, cfg.group_iou, margin_floor,
-                                                             min_count=cfg.min_neighbors)
+        members = group_members(boxes, margins, cfg.group_iou)
+        kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
         logit = self.verifier.logit(features(bgr, group_boxes, counts, margin_sums, best))
         accepted = logit >= cfg.verifier_threshold
         group_boxes, scores = group_boxes[accepted], expit(logit[accepted])
+        if self.box_regressor is not None and len(group_boxes):
+            group_features = member_features(members[0], members[1], members[2], kept[accepted], group_boxes,
+                                             margin_floor, bgr.shape[1::-1])
+            group_boxes = self.box_regressor.refine(group_boxes, group_features)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
         return group_boxes[keep], scores[keep]
