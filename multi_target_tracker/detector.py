@@ -518,18 +518,23 @@ class Detector:
         out["score"], out["class_id"] = scores, cfg.class_id
         return out
 
-    def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
-        """Groups of at least ``min_neighbors`` windows that the colour verifier accepts, scored by its probability,
-        their boxes refined by the box regressor if one is configured."""
+    def candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """Every group of at least ``min_neighbors`` windows before the verifier decides: ``(boxes, log odds)``,
+        the boxes refined by the box regressor if one is configured (before ``box_scale``)."""
         cfg = self.config
         members = group_members(boxes, margins, cfg.group_iou)
         kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
         logit = self.verifier.logit(features(bgr, group_boxes, counts, margin_sums, best))
+        if self.box_regressor is not None and len(group_boxes):
+            group_boxes = self.box_regressor.refine(group_boxes, member_features(
+                members[0], members[1], members[2], kept, group_boxes, margin_floor, bgr.shape[1::-1]))
+        return group_boxes, logit
+
+    def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """The :meth:`candidates` that the colour verifier accepts, scored by its probability, contained ones dropped."""
+        cfg = self.config
+        group_boxes, logit = self.candidates(bgr, boxes, margins, margin_floor)
         accepted = logit >= cfg.verifier_threshold
         group_boxes, scores = group_boxes[accepted], expit(logit[accepted])
-        if self.box_regressor is not None and len(group_boxes):
-            group_features = member_features(members[0], members[1], members[2], kept[accepted], group_boxes,
-                                             margin_floor, bgr.shape[1::-1])
-            group_boxes = self.box_regressor.refine(group_boxes, group_features)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
         return group_boxes[keep], scores[keep]
