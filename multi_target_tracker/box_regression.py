@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multi_target_tracker.verifier import load_json_model
+
 BOX_REGRESSOR_FORMAT = "aircraft_docking_tracker/group-box-regressor"
 BOX_REGRESSOR_VERSION = 1
 FEATURES = ("bias", "log_count", "log_margin_sum", "best_margin", "log_aspect", "log_area_8",
@@ -146,14 +148,7 @@ class BoxRegressor:
 
     @classmethod
     def load(cls, path: str | Path) -> "BoxRegressor":
-        try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-            raise BoxRegressorError(f"cannot read box regressor {path}: {exc}") from exc
-        try:
-            return cls.from_dict(data)
-        except BoxRegressorError as exc:
-            raise BoxRegressorError(f"{path}: {exc}") from None
+        return load_json_model(path, cls.from_dict, BoxRegressorError, "box regressor")
 
 
 def fit_box_regressor(features: np.ndarray, offsets: np.ndarray, l2: float = 100.0) -> BoxRegressor:
