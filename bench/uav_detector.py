@@ -29,7 +29,11 @@
   model scanning every window size that fits the frame, the same cascade without the colour verifier
   (``CASCADE_ONLY``, the set-up before it), the previous heading-aligned set-up (``PREVIOUS``),
   the upright set-up before it at this altitude (upright 3:2 model, 0 and 90 degrees only: ``UPRIGHT``) and
-  the former set-up (21x14 model at the default altitude, windows from 14 px).
+  the former set-up (21x14 model at the default altitude, windows from 14 px), and the set-up before the box
+  regressor (``VERIFIER_ONLY``: the verifier on the groups' mean boxes).
+* **Why vehicles are missed** (tuning seeds): each counted vehicle of the set-up and of ``VERIFIER_ONLY`` found,
+  or the first reason of :data:`MISS_CLASSES` that fits (no group on it, too few windows, a group the verifier
+  rejects, a group or detection off it at IoU 0.3-0.5, dropped as contained in a better one).
 
 Writes ``bench/results/uav_detector.json`` and ``.md``.
 """
@@ -50,9 +54,10 @@ REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
 from aircraft_docking_tracker.config import from_mapping, package_config_dir  # noqa: E402
-from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, detection_summary  # noqa: E402
+from aircraft_docking_tracker.evaluation.detection_metrics import (  # noqa: E402
+    DetectionAccumulator, detection_summary, match_frame)
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
-from aircraft_docking_tracker.geometry import scale_boxes  # noqa: E402
+from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
@@ -68,11 +73,13 @@ FORMER = {"model": "uav_vehicles_fused.json", "window_margin": 1.5, "min_neighbo
 # and transposed only; its operating point as it was chosen on the tuning seeds
 # the previous heading-aligned set-up (model uav_vehicles_heading.json: positives jittered for a stride-4 scan,
 # negatives mined in the upright and transposed views only; its operating point as chosen on the tuning seeds)
-PREVIOUS = {"verifier": "", "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
+PREVIOUS = {"verifier": "", "box_regressor": "", "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
             "stride": 8, "min_neighbors": 8, "window_margin": 1.0, "group_iou": 0.3, "containment": 0.4,
             "box_scale": 0.9}
 # the set-up before the colour verifier: the cascade's window count alone, its operating point (tuning seeds)
-CASCADE_ONLY = {"verifier": "", "min_neighbors": 8}
+CASCADE_ONLY = {"verifier": "", "box_regressor": "", "min_neighbors": 8, "containment": 0.4, "box_scale": 0.9}
+# the set-up before the box regressor (session 8): the verifier on the groups' mean boxes, its operating point
+VERIFIER_ONLY = {"box_regressor": "", "min_neighbors": 3, "containment": 0.4, "box_scale": 0.9}
 UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
            "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 HEIGHTS = (1.0, 2.0, 2.5, 3.0, 4.0)
@@ -217,6 +224,60 @@ def spread(per_seed: list[dict]) -> dict:
             "fps_mean": float(np.mean([r["fps"] for r in per_seed]))}
 
 
+MISS_CLASSES = ("counted vehicles", "found", "detection on it at IoU 0.3-0.5 (mislocalised)",
+                "detection on it at IoU >= 0.5 taken by another vehicle",
+                "group at IoU >= 0.5 rejected by the verifier", "group at IoU >= 0.5 accepted, dropped as contained",
+                "groups at IoU 0.3-0.5 only, rejected by the verifier", "groups at IoU 0.3-0.5 only, accepted, dropped as contained",
+                "only groups of fewer than min_neighbors windows at IoU >= 0.3", "no group at IoU >= 0.3",
+                "missed and cut by the frame border")
+
+
+def miss_breakdown(detectors: dict, seeds: list[tuple[int, int]]) -> dict:
+    """Per detector (each with a verifier), its counted vehicles of ``seeds`` by :data:`MISS_CLASSES`: found, or
+    the first reason that fits why not. The detectors' windows are scanned once a frame (same model and scan)."""
+    first = next(iter(detectors.values()))
+    out = {name: dict.fromkeys(MISS_CLASSES, 0) for name in detectors}
+    for seed, difficulty in seeds:
+        for image, truth, ignore, _ in frames_of(seed, difficulty, UAV_SETUP_GROUND_RESOLUTION):
+            raw = first.raw(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
+            counted = np.flatnonzero(~ignore)
+            cut = truncated(truth, image.shape[1::-1])
+            for name, det in detectors.items():
+                cfg = det.config
+                boxes, logit = det.candidates(image, *raw, cfg.window_margin)
+                boxes = scale_boxes(boxes, cfg.box_scale) if len(boxes) else boxes
+                final, scores = det._verified(image, *raw, cfg.window_margin)
+                final = scale_boxes(final, cfg.box_scale) if len(final) else final
+                small = scale_boxes(group_stats(*raw, cfg.group_iou, cfg.window_margin)[0], cfg.box_scale)
+                matched, _ = match_frame(final, scores, truth, 0.5, ignore)
+                iou_det, iou_group, iou_small = (box_iou(b[:, None], truth[None]) if len(b) and len(truth)
+                                                 else np.zeros((len(b), len(truth))) for b in (final, boxes, small))
+                accepted = logit >= cfg.verifier_threshold
+                m = out[name]
+                for g in counted:
+                    m["counted vehicles"] += 1
+                    if g in matched:
+                        m["found"] += 1
+                        continue
+                    m["missed and cut by the frame border"] += int(cut[g])
+                    good, near = iou_group[:, g] >= 0.5, (iou_group[:, g] >= 0.3) & (iou_group[:, g] < 0.5)
+                    if (iou_det[:, g] >= 0.5).any():
+                        m["detection on it at IoU >= 0.5 taken by another vehicle"] += 1
+                    elif (iou_det[:, g] >= 0.3).any():
+                        m["detection on it at IoU 0.3-0.5 (mislocalised)"] += 1
+                    elif good.any():
+                        m["group at IoU >= 0.5 accepted, dropped as contained" if (good & accepted).any()
+                          else "group at IoU >= 0.5 rejected by the verifier"] += 1
+                    elif near.any():
+                        m["groups at IoU 0.3-0.5 only, accepted, dropped as contained" if (near & accepted).any()
+                          else "groups at IoU 0.3-0.5 only, rejected by the verifier"] += 1
+                    elif (iou_small[:, g] >= 0.3).any():
+                        m["only groups of fewer than min_neighbors windows at IoU >= 0.3"] += 1
+                    else:
+                        m["no group at IoU >= 0.3"] += 1
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer seeds (about 2 min)")
@@ -235,12 +296,13 @@ def main() -> int:
     upright = Detector(DetectorConfig(**UPRIGHT))
     previous = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **PREVIOUS}))
     cascade_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **CASCADE_ONLY}))
+    verifier_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **VERIFIER_ONLY}))
     other = (Detector(from_mapping(DetectorConfig, {**_fields(det.config), "model": args.other_seed_model}))
              if args.other_seed_model else None)
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
-               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "cascade_only": [], "previous": [], "upright": [], "former": [], "other_seed": [],
+               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "cascade_only": [], "verifier_only": [], "previous": [], "upright": [], "former": [], "other_seed": [],
                "other_seed_model": args.other_seed_model}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
@@ -253,6 +315,7 @@ def main() -> int:
         results["setup_results"].append(run(det, items))
         results["full_pyramid"].append(run(full, items[::4]))      # speed and false alarms without the size prior
         results["cascade_only"].append(run(cascade_only, items))
+        results["verifier_only"].append(run(verifier_only, items))
         results["upright"].append(run(upright, items))
         results["previous"].append(run(previous, items))
         if other is not None:
@@ -262,10 +325,13 @@ def main() -> int:
         r = results["setup_results"][-1]
         print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
               f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
-    for key in ("setup_results", "full_pyramid", "cascade_only", "previous", "upright", "former", "other_seed"):
+    for key in ("setup_results", "full_pyramid", "cascade_only", "verifier_only", "previous", "upright", "former", "other_seed"):
         if results[key]:
             results[key + "_summary"] = spread(results[key])
-    results["confidences"] = confidence_summary(confidence_runs(det, TUNING), confidence_runs(det, seeds))
+    # group confidences of the verifier's groups as they were compared (mean boxes, box_scale 0.9)
+    results["confidences"] = confidence_summary(confidence_runs(verifier_only, TUNING),
+                                                confidence_runs(verifier_only, seeds))
+    results["misses"] = {"tuning": miss_breakdown({"setup": det, "verifier_only": verifier_only}, TUNING)}
     results["setup_results_difficulty_1_summary"] = spread(
         [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
     (HERE / "results").mkdir(exist_ok=True)
@@ -315,8 +381,10 @@ def markdown(results: dict) -> str:
              line("same model, every window size (no altitude prior; every 4th frame)", full),
              *([line(f"same recipe, another training seed ({Path(results['other_seed_model']).name})",
                      results["other_seed_summary"])] if "other_seed_summary" in results else []),
-             line("same cascade without the colour verifier (window count, min_neighbors 8: the set-up before it)",
-                  results["cascade_only_summary"]),
+             line("same cascade and verifier without the box regressor (mean boxes, box_scale 0.9, min_neighbors 3, "
+                  "containment 0.4: the set-up before it)", results["verifier_only_summary"]),
+             line("same cascade without the colour verifier (window count, min_neighbors 8: the set-up before the "
+                  "verifier)", results["cascade_only_summary"]),
              line("previous set-up: uav_vehicles_heading.json (stride-4 jitter, upright-view mining), its operating "
                   "point", previous),
              line("previous set-up: upright 3:2 model uav_vehicles_low.json, 0/90 degrees only", upright),
@@ -332,6 +400,12 @@ def markdown(results: dict) -> str:
                f"{c['detection_worst']:.3f} / {c['false_alarms_worst']:.3f} | {c['average_precision']:.3f} | "
                f"{c['detection_at_fa_015']:.3f} / {c['detection_at_fa_030']:.3f} |"
                for n, c in results["confidences"].items()],
+             "", "Why vehicles are missed (the 18 tuning seeds, every 4th frame; each missed counted vehicle in the "
+             "first class that fits, in this order; IoU with the vehicle's box):", "",
+             "| class | " + " | ".join(results["misses"]["tuning"]) + " |",
+             "|---|" + "---|" * len(results["misses"]["tuning"]),
+             *[f"| {c} | " + " | ".join(str(m[c]) for m in results["misses"]["tuning"].values()) + " |"
+               for c in MISS_CLASSES],
              "", f"Targets (issue 12): detection >= {TARGET_DETECTION} at false alarms <= {TARGET_FALSE_ALARMS}; "
              f">= {TARGET_FPS:g} frames/s at 640x480 on one core."]
     return "\n".join(rows) + "\n"

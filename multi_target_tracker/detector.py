@@ -31,6 +31,9 @@ seen from above or an aircraft on a stand do not overlap, but a window on half a
 Last, ``box_scale`` scales each box about its centre: a cascade trained on object-centred boxes
 also passes windows a little inside the object (their texture is the object's), so the mean
 window can sit inside it; the UAV set-up calibrates this on its tuning scenes.
+With a colour ``verifier`` (the UAV set-up's, :mod:`verifier`) the groups of at least ``min_neighbors``
+windows are kept by its log odds instead of their count, and a ``box_regressor`` (:mod:`box_regression`)
+then moves each kept group's box edges by offsets predicted from where its member windows lie.
 On the drone-view tiles this grouping, against keeping the best window of each cluster, took
 detection at <= 10 % false alarms from 70 % to 91 % with the same cascade (bench/README.md).
 """
@@ -50,6 +53,7 @@ from aircraft_docking_tracker.geometry import box_to_quad, scale_boxes
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
+from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
 from multi_target_tracker.verifier import Verifier, VerifierError, features
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -98,6 +102,10 @@ class DetectorConfig:
                           "probability; needs colour images and the cascade backend (the UAV set-up's)")
     verifier_threshold: float = param(0.0, "log odds a group needs from the verifier to be a detection (chosen on "
                                       "tuning scenes)", low=-50.0, high=50.0)
+    box_regressor: str = param("", "box regressor of the verified groups (JSON model; a bare name is looked up in "
+                               "multi_target_tracker/models; empty: none): moves each edge of a group's mean box by "
+                               "an offset predicted from its member windows, before containment and box_scale; needs "
+                               "the verifier (the UAV set-up's)")
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -123,6 +131,8 @@ class DetectorConfig:
             raise ConfigError("angles other than 0 need the cascade backend", ("angles", "backend"))
         if self.verifier and self.backend != "cascade":
             raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
+        if self.box_regressor and not self.verifier:
+            raise ConfigError("a box regressor needs the verifier", ("box_regressor", "verifier"))
         if self.min_size > 0 and self.max_size > 0 and self.min_size > self.max_size:
             raise ConfigError(f"min_size={self.min_size} must not exceed max_size={self.max_size}",
                               ("min_size", "max_size"))
@@ -135,6 +145,10 @@ class DetectorConfig:
             load_verifier(self)
         except (DetectorError, VerifierError) as exc:
             raise ConfigError(f"verifier {self.verifier!r}: {exc}", ("verifier",)) from None
+        try:
+            load_box_regressor(self)
+        except (DetectorError, BoxRegressorError) as exc:
+            raise ConfigError(f"box regressor {self.box_regressor!r}: {exc}", ("box_regressor",)) from None
 
 
 def resolve_model(name: str) -> Path:
@@ -188,6 +202,13 @@ def load_verifier(cfg: DetectorConfig) -> Verifier | None:
     if not cfg.verifier:
         return None
     return Verifier.load(resolve_model(cfg.verifier))
+
+
+def load_box_regressor(cfg: DetectorConfig) -> BoxRegressor | None:
+    """The box regressor of ``cfg`` (None when ``cfg.box_regressor`` is empty)."""
+    if not cfg.box_regressor:
+        return None
+    return BoxRegressor.load(resolve_model(cfg.box_regressor))
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -375,15 +396,21 @@ def group_stats(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, 
     """The groups of :func:`group_members` of at least ``min_count`` windows: ``(boxes, counts, margin_sums,
     best_margins)`` with the mean box of each group, its number of windows, its members' margins above
     ``margin_floor`` summed (OpenCV's level weights) and its best member's margin."""
-    boxes, margins, label, seeds = group_members(boxes, margins, group_iou)
+    return members_stats(*group_members(boxes, margins, group_iou), margin_floor, min_count)[1:]
+
+
+def members_stats(boxes: np.ndarray, margins: np.ndarray, label: np.ndarray, seeds: np.ndarray,
+                  margin_floor: float = 0.0, min_count: int = 1):
+    """:func:`group_stats` from :func:`group_members`' output, with the labels of the groups kept first:
+    ``(kept labels, boxes, counts, margin_sums, best_margins)``."""
     if len(seeds) == 0:
-        return np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
     counts = np.bincount(label, minlength=len(seeds))
     sums = np.zeros((len(seeds), 4))
     np.add.at(sums, label, boxes)          # members in window order, as a per-group mean adds them
     margin_sums = np.bincount(label, weights=margins - margin_floor, minlength=len(seeds))
     big = counts >= min_count
-    return sums[big] / counts[big, None], counts[big], margin_sums[big], margins[seeds[big]]
+    return np.flatnonzero(big), sums[big] / counts[big, None], counts[big], margin_sums[big], margins[seeds[big]]
 
 
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
@@ -424,7 +451,8 @@ class Detector:
         self.pool = ThreadPoolExecutor(cfg.threads, "detector") if cfg.threads > 1 else None
         try:
             self.verifier = load_verifier(cfg) if self.cascade is not None else None
-        except VerifierError as exc:
+            self.box_regressor = load_box_regressor(cfg) if self.verifier is not None else None
+        except (VerifierError, BoxRegressorError) as exc:
             raise DetectorError(str(exc)) from None
 
     @property
@@ -493,12 +521,22 @@ class Detector:
         out["score"], out["class_id"] = scores, cfg.class_id
         return out
 
-    def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
-        """Groups of at least ``min_neighbors`` windows that the colour verifier accepts, scored by its probability."""
+    def candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """Every group of at least ``min_neighbors`` windows before the verifier decides: ``(boxes, log odds)``,
+        the boxes refined by the box regressor if one is configured (before ``box_scale``)."""
         cfg = self.config
-        group_boxes, counts, margin_sums, best = group_stats(boxes, margins, cfg.group_iou, margin_floor,
-                                                             min_count=cfg.min_neighbors)
+        members = group_members(boxes, margins, cfg.group_iou)
+        kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
         logit = self.verifier.logit(features(bgr, group_boxes, counts, margin_sums, best))
+        if self.box_regressor is not None and len(group_boxes):
+            group_boxes = self.box_regressor.refine(group_boxes, member_features(
+                members[0], members[1], members[2], kept, group_boxes, margin_floor, bgr.shape[1::-1]))
+        return group_boxes, logit
+
+    def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """The :meth:`candidates` that the colour verifier accepts, scored by its probability, contained ones dropped."""
+        cfg = self.config
+        group_boxes, logit = self.candidates(bgr, boxes, margins, margin_floor)
         accepted = logit >= cfg.verifier_threshold
         group_boxes, scores = group_boxes[accepted], expit(logit[accepted])
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)

@@ -116,14 +116,19 @@ class Verifier:
 
     @classmethod
     def load(cls, path: str | Path) -> "Verifier":
-        try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-            raise VerifierError(f"cannot read verifier {path}: {exc}") from exc
-        try:
-            return cls.from_dict(data)
-        except VerifierError as exc:
-            raise VerifierError(f"{path}: {exc}") from None
+        return load_json_model(path, cls.from_dict, VerifierError, "verifier")
+
+
+def load_json_model(path: str | Path, from_dict, error: type[ValueError], what: str):
+    """``from_dict`` of the JSON file ``path``; any failure is an ``error`` naming the file and ``what`` it is."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise error(f"cannot read {what} {path}: {exc}") from exc
+    try:
+        return from_dict(data)
+    except error as exc:
+        raise error(f"{path}: {exc}") from None
 
 
 def fit_verifier(features: np.ndarray, labels: np.ndarray, l2: float = 1e-3) -> Verifier:

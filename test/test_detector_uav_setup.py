@@ -28,7 +28,9 @@ SETUP = package_config_dir() / "uav_camera.yaml"
 MIN_DETECTION, MAX_FALSE_ALARMS = 0.35, 0.35
 # the previous set-up (upright 3:2 windows, vehicles at any heading in them; bench/uav_detector.py UPRIGHT)
 # the same cascade without the colour verifier (the set-up before it; bench/uav_detector.py CASCADE_ONLY)
-CASCADE_ONLY = {"verifier": "", "min_neighbors": 8}
+CASCADE_ONLY = {"verifier": "", "box_regressor": "", "min_neighbors": 8, "containment": 0.4, "box_scale": 0.9}
+# the set-up before the box regressor (the verifier on the mean boxes; bench/uav_detector.py VERIFIER_ONLY)
+VERIFIER_ONLY = {"box_regressor": "", "min_neighbors": 3, "containment": 0.4, "box_scale": 0.9}
 UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
            "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 
@@ -100,3 +102,17 @@ def test_the_colour_verifier_halves_the_cascades_false_alarms_on_held_out_scenes
     c_vehicles, c_detections, c_true = np.array([_counts(cascade_only, s) for s in seeds]).sum(axis=0)
     assert 1 - true / max(detections, 1) <= 1 - c_true / max(c_detections, 1) - 0.1
     assert true / vehicles >= c_true / c_vehicles - 0.05
+
+
+def test_the_box_regressor_finds_more_vehicles_on_held_out_scenes(detector):
+    """Side by side on the same held-out scenes: the box regressor moves groups that lie on a vehicle at IoU
+    0.3-0.5 onto it, so more vehicles are found without more false alarms (measured 0.64 against 0.52
+    detection, 0.14 against 0.19 false alarms)."""
+    before = Detector(dataclasses.replace(detector.config, **VERIFIER_ONLY))
+    assert detector.box_regressor is not None and before.box_regressor is None
+    seeds = UAV_EVAL_SEEDS[900:904]
+    vehicles, detections, true = np.array([_counts(detector, s) for s in seeds]).sum(axis=0)
+    b_vehicles, b_detections, b_true = np.array([_counts(before, s) for s in seeds]).sum(axis=0)
+    assert vehicles == b_vehicles
+    assert true >= b_true + 0.05 * vehicles, (true, b_true, vehicles)
+    assert 1 - true / max(detections, 1) <= 1 - b_true / max(b_detections, 1) + 0.03

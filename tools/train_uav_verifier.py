@@ -50,10 +50,26 @@ def scene_frames(seed: int, difficulty: int, every: int):
 
 
 def cascade_detector(overrides: dict | None = None) -> Detector:
-    detector = build_processor("detector", package_config_dir() / SETUP, {"verifier": "", **(overrides or {})}).detector
+    detector = build_processor("detector", package_config_dir() / SETUP,
+                               {"verifier": "", "box_regressor": "", **(overrides or {})}).detector
     if detector is None:
         raise SystemExit(f"{SETUP}: the detector cannot be built")
     return detector
+
+
+def setup_verifier():
+    """The set-up's colour verifier (config/uav_camera.yaml's)."""
+    return build_processor("detector", package_config_dir() / SETUP, {"box_regressor": ""}).detector.verifier
+
+
+def training_scenes(n: int) -> list[tuple[int, int]]:
+    """(seed, difficulty) of the first ``n`` training scenes of difficulty 1 and half as many of difficulty 2."""
+    first = UAV_TRAIN_SEEDS.start
+    return [(first + k, 1) for k in range(n)] + [(first + 100 + k, 2) for k in range(n // 2)]
+
+
+TUNING = ([(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] +
+          [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)])
 
 
 def samples(det: Detector, seeds, min_windows: int) -> tuple[np.ndarray, np.ndarray]:
@@ -116,9 +132,7 @@ def main() -> int:
     args = parser.parse_args()
     cv2.setNumThreads(1)
     det = cascade_detector({} if args.window_margin is None else {"window_margin": args.window_margin})
-    first = UAV_TRAIN_SEEDS.start
-    train = ([(first + k, 1) for k in range(args.train_scenes)] +
-             [(first + 100 + k, 2) for k in range(args.train_scenes // 2)])
+    train = training_scenes(args.train_scenes)
     x, y = samples(det, train, args.min_windows)
     verifier = fit_verifier(x, y, args.l2)
     verifier.info.update({"train_seeds": [s for s, _ in train], "cascade": Path(det.config.model).name,
@@ -127,10 +141,8 @@ def main() -> int:
     out = Path(args.out)
     verifier.save(out)
     det.verifier = verifier
-    tuning = ([(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] +
-              [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)])
-    verifier.info["operating_point"] = operating_point(det, tuning, args.min_neighbors)
-    verifier.info["tuning_seeds"] = [s for s, _ in tuning]
+    verifier.info["operating_point"] = operating_point(det, TUNING, args.min_neighbors)
+    verifier.info["tuning_seeds"] = [s for s, _ in TUNING]
     verifier.save(out)
     print(f"wrote {out}: {verifier.info['positives']} vehicle / {verifier.info['samples'] - verifier.info['positives']} "
           f"background groups; operating point {verifier.info['operating_point']}")
