@@ -172,6 +172,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
         {"shape_prior": "start", "rotation_pull": 0.0, "extent_still": "measure"},
     "ISPF, aspect pulled to the start box's (shape_prior start)": {"shape_prior": "start", "rotation_pull": 0.0},
     "ISPF, extent also on a still target": {"extent_still": "measure"},
+    "ISPF, no start re-fit (start_refit 0)": {"start_refit": 0},
     "ISPF, no detector override": {"override_after": 0},
     "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
 }

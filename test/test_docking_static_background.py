@@ -356,7 +356,9 @@ def test_the_motion_pulls_the_centre_and_leaves_the_scale_to_the_appearance():
 def stop_aspect_error(frames, quads, shape_prior, seed):
     """|aspect / true aspect - 1| at the last frame, tracked from the first polygon's axis-aligned box."""
     lo, hi = quads[0].min(axis=0), quads[0].max(axis=0)
-    tracker = DockingTracker(DockingConfig(shape_prior=shape_prior, seed=seed))
+    # start_refit off: the re-fit turns and resizes the loose box within 5 frames, after which the start's
+    # aspect is right too (measured: error 0.066 at the stop with shape_prior start), and this compares the pulls
+    tracker = DockingTracker(DockingConfig(shape_prior=shape_prior, start_refit=0, seed=seed))
     tracker.start(frames[0], np.r_[lo, hi - lo])
     for frame in frames[1:]:
         r = tracker.step(frame)

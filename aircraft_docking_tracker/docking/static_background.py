@@ -54,6 +54,16 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   (a stand camera) until one frame's phase-correlation shift exceeds ``motion_max_shift`` (0.15 level
   px; the synthetic stands: < 0.1 in 90 % of frames, OTB Car4's following camera: 0.23 in the median),
   then again after ``still_frames`` frames below it.
+* **Start silhouette** (:func:`start_silhouette`; ``start_refit`` in ``ispf.py``): the start region is unknown
+  to ``B`` for the first frames, so no foreground exists there while the appearance model learns the start
+  box. What moved inside it does: ``d = |median(last three frames) - median(first three)|`` (gain and offset
+  fitted outside the region; the medians drop rain streaks that last one frame), 5x5-blurred; a pixel moved
+  when ``d`` exceeds its median outside the region by ``z`` noise widths (1.4826 MAD outside) and by at least
+  ``min_contrast`` grey levels (the width alone is 0.06 grey levels on a clean stand: the light's own small
+  changes passed it and the silhouette came out round); inside the start state grown ``grow``, closed 5x5.
+  Measured: its principal axis, its elongation (ratio of the principal standard deviations) and the fraction
+  of the pixels outside the region that moved (rain, a moving camera; tuning stands: <= 0.05 in clear light
+  and low sun, 0.07-0.16 in rain). The first ``keep_first`` frames at the level are kept for it.
 * **Extent** (:func:`foreground_extent`): ``F`` sampled on a grid covering ``extent`` times the
   estimate's template rectangle, in the estimate's template coordinates ``(u, v)``; threshold, close
   3x3, the connected components that overlap the rectangle; their bounding box ``[u0, u1] x [v0, v1]``
@@ -72,6 +82,16 @@ from . import affine_group as ag
 
 GRID_SIDE = 64          # samples per side of the extent grid
 NOISE_FLOOR = 1.0       # grey levels: a smaller mean frame-to-frame change is taken as this (camera_moving)
+
+
+@dataclass
+class StartSilhouette:
+    """What moved inside the start region over the first frames (:func:`start_silhouette`)."""
+
+    axis_angle: float       # image angle of the silhouette's major axis [rad], in [-pi/2, pi/2)
+    elongation: float       # ratio of its principal standard deviations (major / minor)
+    outside: float          # fraction of the pixels outside the region that moved as much (camera, rain)
+    pixels: int             # silhouette pixels at the level
 
 
 @dataclass
@@ -116,7 +136,10 @@ class StaticBackground:
     def __init__(self, max_width: int = 320, step: float = 2.0, k: float = 2.0, max_outside: float = 0.2,
                  guard: float = 1.3, max_shift: float = 0.5, still_level: float = 3.0, still_frames: int = 5,
                  flicker_gain: float = 0.0, flicker_step: float = 1.0, motion: bool = False,
-                 motion_max_shift: float = 0.15, max_stale: float = 1.35, stale_window: int = 25):
+                 motion_max_shift: float = 0.15, max_stale: float = 1.35, stale_window: int = 25,
+                 keep_first: int = 0):
+        self.keep_first = keep_first
+        self.first: list[np.ndarray] = []           # the first keep_first frames at the level (start_silhouette)
         self.measure_motion = motion
         self.max_stale, self.stale_window = max_stale, stale_window
         self._stale: list[float] = []
@@ -153,6 +176,7 @@ class StaticBackground:
         self.foreground, self.trusted, self.motion = None, False, None
         self.still_run = self.still_frames + 1         # a stand camera: still until a frame says otherwise
         self._stale, self.camera_moving = [], False
+        self.first = [image] if self.keep_first > 0 else []
 
     @property
     def target_still(self) -> bool:
@@ -190,6 +214,8 @@ class StaticBackground:
                                          np.clip(target - self.flicker, -self.flicker_step, self.flicker_step), 0.0)
             self.trusted = bool(np.isfinite(fg).all() and (fg[outside] > 0.5).mean() <= self.max_outside)
             self.foreground = fg * self.known if self.trusted else None
+        if len(self.first) < self.keep_first:
+            self.first.append(image)
         self._learn(image)
         return self.foreground
 
@@ -235,6 +261,37 @@ class StaticBackground:
         moved = image.astype(np.float32) if outside is None else np.where(outside, image, previous)
         (dx, dy), _ = cv2.phaseCorrelate(previous, moved.astype(np.float32), self._window)
         return float(np.hypot(dx, dy))
+
+
+def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, z: float = 4.0, grow: float = 1.3,
+                     surround: float = 1.6, min_pixels: int = 30, min_contrast: float = 1.0) -> StartSilhouette | None:
+    """The silhouette of what moved inside ``state``'s rectangle over ``images`` (>= 4 frames of a still camera
+    at ``scale`` times the frame's size, the first at the start; module docstring), or None (too few frames,
+    too little outside the region to measure the noise, fewer than ``min_pixels`` silhouette pixels)."""
+    if len(images) < 4:
+        return None
+    first = np.median(np.stack(images[:3]), axis=0)
+    last = np.median(np.stack(images[-3:]), axis=0)
+    shape = first.shape
+    outside = state_mask(state, surround, shape, scale) == 0
+    if outside.sum() < 100:
+        return None
+    b, i = first[outside][::7], last[outside][::7]
+    (gain, offset), *_ = np.linalg.lstsq(np.stack([b, np.ones_like(b)], 1), i, rcond=None)
+    d = cv2.blur(np.abs(last - (gain * first + offset)).astype(np.float32), (5, 5))
+    rest = d[outside]
+    median = float(np.median(rest))
+    sigma = 1.4826 * float(np.median(np.abs(rest - median))) + 1e-3
+    moved = d - median > max(z * sigma, min_contrast)
+    region = state_mask(state, grow, shape, scale) > 0
+    mask = cv2.morphologyEx((moved & region).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+    ys, xs = np.nonzero(mask)
+    if len(xs) < min_pixels:
+        return None
+    evals, evecs = np.linalg.eigh(np.cov(np.stack([xs, ys]).astype(float)))
+    angle = (float(np.arctan2(evecs[1, 1], evecs[0, 1])) + np.pi / 2) % np.pi - np.pi / 2
+    elongation = float(np.sqrt(max(evals[1], 1e-12) / max(evals[0], 1e-12)))
+    return StartSilhouette(angle, elongation, float(moved[outside].mean()), int(len(xs)))
 
 
 def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, extent: float = 1.6,
