@@ -200,6 +200,9 @@ class FilterConfig(AppearanceConfig):
                                    "frame (running median)", low=0.1, high=50.0)
     foreground_k: float = param(2.0, "static camera: foreground starts k σ above the frame's median difference",
                                 low=0.5, high=10.0)
+    background_rows: bool = param(True, "static camera: remove each image row's median difference from the background "
+                                  "outside the target before the foreground threshold (a smooth sky's quantisation "
+                                  "bands under a light change are row-wise offsets; false: one gain and offset only)")
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -290,7 +293,8 @@ class AffineParticleFilter:
         self.background = StaticBackground(step=config.background_step, k=config.foreground_k,
                                            max_outside=config.max_foreground_outside,
                                            flicker_gain=config.flicker_gain, motion=config.motion_gain > 0,
-                                           max_stale=config.max_stale, stale_window=config.stale_window)
+                                           max_stale=config.max_stale, stale_window=config.stale_window,
+                                           row_offset=config.background_rows)
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "still": 0, "none": 0, "implausible": 0, "refused": 0}
 
     # ------------------------------------------------------------------ shared building blocks

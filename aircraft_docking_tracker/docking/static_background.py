@@ -116,8 +116,10 @@ class StaticBackground:
     def __init__(self, max_width: int = 320, step: float = 2.0, k: float = 2.0, max_outside: float = 0.2,
                  guard: float = 1.3, max_shift: float = 0.5, still_level: float = 3.0, still_frames: int = 5,
                  flicker_gain: float = 0.0, flicker_step: float = 1.0, motion: bool = False,
-                 motion_max_shift: float = 0.15, max_stale: float = 1.35, stale_window: int = 25):
+                 motion_max_shift: float = 0.15, max_stale: float = 1.35, stale_window: int = 25,
+                 row_offset: bool = False, row_min: int = 16):
         self.measure_motion = motion
+        self.row_offset, self.row_min = row_offset, row_min
         self.max_stale, self.stale_window = max_stale, stale_window
         self._stale: list[float] = []
         self.camera_moving = False
@@ -172,7 +174,8 @@ class StaticBackground:
             shift = self.camera_shift(image, outside)
             b, i = self.background[outside][::7], image[outside][::7]
             (gain, offset), *_ = np.linalg.lstsq(np.stack([b, np.ones_like(b)], 1), i, rcond=None)
-            difference = np.abs(image - (gain * self.background + offset))
+            signed = image - (gain * self.background + offset)
+            difference = np.abs(signed)
             self.camera_moving = self._stale_background(difference, image, outside)
         self.still_run = self.still_run + 1 if shift <= self.motion_max_shift else 0
         if self.measure_motion and shift <= self.max_shift and self.still_run > self.still_frames:
@@ -189,6 +192,10 @@ class StaticBackground:
                 self.flicker += np.where(outside & self.known,
                                          np.clip(target - self.flicker, -self.flicker_step, self.flicker_step), 0.0)
             self.trusted = bool(np.isfinite(fg).all() and (fg[outside] > 0.5).mean() <= self.max_outside)
+            if self.trusted and self.row_offset:    # trust and threshold as above; the silhouette without the rows' bands
+                rows = row_offsets(signed, outside & self.known, self.row_min)
+                d = cv2.blur(np.abs(signed - rows[:, None]) * self.known, (5, 5))
+                fg = np.clip((d - threshold) / (self.k * sigma), 0.0, 1.0)
             self.foreground = fg * self.known if self.trusted else None
         self._learn(image)
         return self.foreground
@@ -235,6 +242,18 @@ class StaticBackground:
         moved = image.astype(np.float32) if outside is None else np.where(outside, image, previous)
         (dx, dy), _ = cv2.phaseCorrelate(previous, moved.astype(np.float32), self._window)
         return float(np.hypot(dx, dy))
+
+
+def row_offsets(signed: np.ndarray, outside: np.ndarray, min_count: int = 16) -> np.ndarray:
+    """Per image row, the median of ``signed`` (frame minus background) over the row's pixels outside the
+    target, 0 for a row with fewer than ``min_count`` of them (``row_offset``, module docstring)."""
+    masked = np.where(outside, signed, np.nan)
+    count = outside.sum(axis=1)
+    offsets = np.zeros(signed.shape[0], np.float32)
+    rows = count >= min_count
+    if rows.any():
+        offsets[rows] = np.nanmedian(masked[rows], axis=1)
+    return offsets
 
 
 def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, extent: float = 1.6,
