@@ -177,6 +177,9 @@ class FilterConfig(AppearanceConfig):
     extent_gain: float = param(0.3, "static camera: fraction κ of the foreground extent's correction applied "
                                "to X̂ each frame (static_background.py; a moving camera turns it off frame by "
                                "frame; 0: off, the seed's filter)", low=0.0, high=1.0)
+    extent_wide: float = param(2.4, "static camera: a silhouette that runs off the extent's grid (1.6 X̂) is measured "
+                               "again on a grid this many times X̂ (0: not measured, as before; a lagging X̂'s own "
+                               "target runs off the small grid)", low=0.0, high=5.0)
     extent_rotation: float = param(0.0, "static camera: the measured rectangle is turned to the silhouette's "
                                    "principal axis, by at most this much per frame [rad] (0: off, the rectangle "
                                    "keeps X̂'s rotation; measured: follows the turn, but from the first polygon the "
@@ -219,6 +222,9 @@ class FilterConfig(AppearanceConfig):
                                    "frame (running median)", low=0.1, high=50.0)
     foreground_k: float = param(2.0, "static camera: foreground starts k σ above the frame's median difference",
                                 low=0.5, high=10.0)
+    background_rows: bool = param(True, "static camera: remove each image row's median difference from the background "
+                                  "outside the target before the foreground threshold (a smooth sky's quantisation "
+                                  "bands under a light change are row-wise offsets; false: one gain and offset only)")
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -313,7 +319,8 @@ class AffineParticleFilter:
                                            max_outside=config.max_foreground_outside,
                                            flicker_gain=config.flicker_gain, motion=config.motion_gain > 0,
                                            max_stale=config.max_stale, stale_window=config.stale_window,
-                                           keep_first=config.start_refit + 1 if config.start_refit else 0)
+                                           keep_first=config.start_refit + 1 if config.start_refit else 0,
+                                           row_offset=config.background_rows)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
@@ -475,6 +482,15 @@ class AffineParticleFilter:
         if self._start_box is not None:
             self._start_track.append((frame, None))
 
+    def _silhouette(self, foreground: np.ndarray, estimate: np.ndarray):
+        """The foreground's rectangle around X̂ (static_background.foreground_extent) on the grid of 1.6 X̂, or,
+        when the silhouette runs off it, on the grid of ``extent_wide`` X̂ (a lagging or too narrow X̂ whose own
+        target runs off the small grid: measured, that is a runaway, scale and aspect lost for good)."""
+        extent = foreground_extent(foreground, estimate, self.background.scale)
+        if extent is None and self.config.extent_wide > 1.6:
+            extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide)
+        return extent
+
     def _extent_correction(self, estimate: np.ndarray) -> np.ndarray | None:
         """The step ``exp(extent_gain · log C)`` that moves X̂ toward the foreground's rectangle C
         (static_background.py), or None: no trusted foreground, no silhouette, or an implausible one
@@ -487,7 +503,7 @@ class AffineParticleFilter:
         if self.config.extent_still == "skip" and self.background.target_still:
             self.extent_counts["still"] += 1
             return None
-        extent = foreground_extent(foreground, estimate, self.background.scale)
+        extent = self._silhouette(foreground, estimate)
         if extent is None:
             self.extent_counts["none"] += 1
             return None
@@ -518,7 +534,7 @@ class AffineParticleFilter:
         if self.background.target_still:
             self.shape_counts["still"] += 1
             return
-        extent = foreground_extent(foreground, estimate, self.background.scale)
+        extent = self._silhouette(foreground, estimate)
         if extent is None or not _plausible(extent):
             return
         turn = (extent.axis_angle + np.pi / 2) % np.pi - np.pi / 2
