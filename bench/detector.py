@@ -418,13 +418,16 @@ def choose_regressed(config: DetectorConfig, folds: list, regressors: list) -> d
     return best[1]
 
 
-def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: str = "fused") -> dict:
+def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: str = "fused"):
     """The group box regressor (``box_regression``) on the drone-view prefix folds, on fold models already in
     ``work`` (named as ``kfold`` names them). Per held-out fold k: the regressor is trained on the held-out
     groups of the other folds' models (their tiles are fold k's training tiles, scored by models that did not
     train on them; those models saw fold k's tiles: ``kfold``'s crossfit leak); the grouping is chosen by rule
     ``worst-fold`` over those inner folds, each refined by a regressor trained without it (nor fold k); then
-    fold k is scored with and without the regressor at its own choice and at the node defaults."""
+    fold k is scored with and without the regressor at its own choice and at the node defaults.
+
+    Returns ``(results, regressor)``: the regressor trained on all four folds' held-out groups (the shipped
+    drone-view regressor when the fold models are the shipped model's recipe and training seed)."""
     defaults = DetectorConfig()
     raws_by_fold, sizes_by_fold, models = [], [], []
     for k, held in enumerate(FOLDS):
@@ -453,19 +456,28 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
                                                                  chosen["window_margin"])),
                            "at_node_defaults": _rates(regressed_summary(defaults, groups[k], reg, *node))}
             print(f"[box regression seed {seed}] fold {k} {name}: {entry[name]}", flush=True)
+        plain = entry["mean box"]["chosen"]     # the regressor as a last step only: the mean box's grouping kept
+        entry["regressed, mean-box grouping"] = {"chosen": plain, "at_choice": _rates(regressed_summary(
+            defaults, groups[k], regressor, plain["min_neighbors"], plain["window_margin"]))}
         folds.append(entry)
     out = {"seed": seed, "recipe": recipe_name, "feature_set": feature_set, "node_defaults": list(node),
            "iou": BOX_REGRESSION_IOU, "min_windows": BOX_REGRESSION_MIN_WINDOWS, "l2": BOX_REGRESSION_L2,
            "folds": folds}
-    for name in ("mean box", "regressed"):
-        for point in ("at_choice", "at_node_defaults"):
+    for name in ("mean box", "regressed", "regressed, mean-box grouping"):
+        for point in ("at_choice", "at_node_defaults")[:1 if name.endswith("grouping") else 2]:
             det = [f[name][point]["detection_rate"] for f in folds]
             far = [f[name][point]["false_alarm_rate"] for f in folds]
             out.setdefault("summary", {}).setdefault(name, {})[point] = {
                 "mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
                 "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
                 "folds_meeting_target": int(sum(d >= 0.90 and f <= TARGET_FALSE_ALARMS for d, f in zip(det, far)))}
-    return out
+    regressor = fit_box_regressor(*regression_samples(groups), BOX_REGRESSION_L2)
+    regressor.info.update({"fold_models": models, "recipe": recipe_name, "training_seed": seed,
+                           "samples_from": "held-out groups of the prefix-fold models (bench/detector.py "
+                                           "--box-regression)", "iou": BOX_REGRESSION_IOU,
+                           "min_windows": BOX_REGRESSION_MIN_WINDOWS, "window_margins": list(GRID_MARGIN),
+                           "group_iou": defaults.group_iou})
+    return out, regressor
 
 
 def _rates(summary: dict) -> dict:
@@ -553,12 +565,17 @@ def main() -> int:
     parser.add_argument("--box-regression", action="store_true",
                         help="the group box regressor on the fold models in --work (recipe --recipe, training seed "
                         "--seed; trained by --compare), against the mean box; adds its rows to the results")
+    parser.add_argument("--save-regressor", default=None, metavar="JSON",
+                        help="--box-regression: also write the regressor trained on all four folds' held-out groups")
     args = parser.parse_args()
     if args.box_regression:
         cv2.setNumThreads(1)
         if not args.work:
             parser.error("--box-regression needs --work (the folder of the fold models)")
-        br = kfold_box_regression(Path(args.work), args.recipe, args.seed)
+        br, regressor = kfold_box_regression(Path(args.work), args.recipe, args.seed)
+        if args.save_regressor:
+            regressor.save(args.save_regressor)
+            print(f"wrote {args.save_regressor}: {regressor.info['samples']} groups")
         results = json.loads((HERE / "results" / "detector.json").read_text())
         results.setdefault("box_regression", {})[f"{args.recipe}_seed{args.seed}"] = br
         write_results(results)
@@ -849,23 +866,24 @@ def box_regression_markdown(runs: dict) -> list[str]:
             "held-out fold. *Node defaults*: min_neighbors / window_margin of config/detector.yaml. Border-cut boxes "
             "ignored. Columns: detection / false alarms.", "",
             "| seed | fold held out | mean box, inner choice (mn / margin) | regressed, inner choice (mn / margin) | "
-            "mean box, node defaults | regressed, node defaults |", "|---|---|---|---|---|---|"]
+            "regressed at the mean box's inner choice | mean box, node defaults | regressed, node defaults |",
+            "|---|---|---|---|---|---|---|"]
+    arms = (("mean box", "at_choice"), ("regressed", "at_choice"), ("regressed, mean-box grouping", "at_choice"),
+            ("mean box", "at_node_defaults"), ("regressed", "at_node_defaults"))
     for key, run in sorted(runs.items()):
         def cell(f, name, point):
             c = f[name][point]
             text = f"{c['detection_rate']:.3f} / {c['false_alarm_rate']:.3f}"
-            if point == "at_choice":
+            if point == "at_choice" and name != "regressed, mean-box grouping":
                 text += f" ({f[name]['chosen']['min_neighbors']} / {f[name]['chosen']['window_margin']:+.1f})"
             return text
         for f in run["folds"]:
             rows.append(f"| {run['seed']} | {'+'.join(f['held_out'])} | " + " | ".join(
-                cell(f, name, point) for point in ("at_choice", "at_node_defaults") for name in ("mean box", "regressed"))
-                + " |")
+                cell(f, name, point) if name in f else "-" for name, point in arms) + " |")
         rows.append(f"| **{run['seed']}** | **mean / worst** | " + " | ".join(
             "{mean_detection_rate:.3f} / {mean_false_alarm_rate:.3f}; **{worst_detection_rate:.3f} / "
             "{worst_false_alarm_rate:.3f}**; {folds_meeting_target} of 4 folds meet 0.90 / 0.10".format(
-                **run["summary"][name][point]) for point in ("at_choice", "at_node_defaults")
-            for name in ("mean box", "regressed")) + " |")
+                **run["summary"][name][point]) if name in run["summary"] else "-" for name, point in arms) + " |")
     return rows + [""]
 
 
