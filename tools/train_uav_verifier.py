@@ -41,7 +41,7 @@ from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
 from multi_target_tracker.box_regression import member_features  # noqa: E402
 from multi_target_tracker.detector import (  # noqa: E402
-    MODELS_DIR, Detector, group_members, group_stats, members_stats, suppress_contained)
+    MODELS_DIR, Detector, group_members, members_stats, suppress_contained)
 from multi_target_tracker.verifier import features, fit_tree_verifier, fit_verifier  # noqa: E402
 from scipy.special import expit  # noqa: E402
 
@@ -81,30 +81,9 @@ TUNING = ([(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] +
           [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)])
 
 
-def samples(det: Detector, seeds, min_windows: int) -> tuple[np.ndarray, np.ndarray]:
-    """Verifier features and labels of the groups of ``seeds`` (see the module docstring)."""
-    cfg = det.config
-    rows, labels = [], []
-    for seed, difficulty in seeds:
-        for bgr, truth, ignore in scene_frames(seed, difficulty, 8):
-            boxes, margins = det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
-            group_boxes, counts, sums, best = group_stats(boxes, margins, cfg.group_iou, cfg.window_margin,
-                                                          min_count=min_windows)
-            if not len(group_boxes):
-                continue
-            scaled = scale_boxes(group_boxes, cfg.box_scale)
-            iou_counted = (box_iou(scaled[:, None], truth[~ignore][None]).max(axis=1) if (~ignore).any()
-                           else np.zeros(len(scaled)))
-            iou_any = box_iou(scaled[:, None], truth[None]).max(axis=1) if len(truth) else np.zeros(len(scaled))
-            clear = (iou_counted >= 0.5) | (iou_any < 0.3)
-            rows.append(features(bgr, group_boxes, counts, sums, best)[clear])
-            labels.append(iou_counted[clear] >= 0.5)
-        print(f"training seed {seed}: {sum(len(v) for v in labels)} groups so far", flush=True)
-    return np.vstack(rows), np.concatenate(labels)
-
-
-def refined_samples(det: Detector, seeds, min_windows: int) -> tuple[np.ndarray, np.ndarray]:
-    """As :func:`samples`, each group's box refined by ``det.box_regressor`` (colour read and labelled there)."""
+def samples(det: Detector, seeds, min_windows: int, refined: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Verifier features and labels of the groups of ``seeds`` (see the module docstring); with ``refined`` each
+    group's box refined by ``det.box_regressor``, its colour read and its label given there (``--trees``)."""
     cfg = det.config
     rows, labels = [], []
     for seed, difficulty in seeds:
@@ -113,13 +92,16 @@ def refined_samples(det: Detector, seeds, min_windows: int) -> tuple[np.ndarray,
             kept, group_boxes, counts, sums, best = members_stats(*members, cfg.window_margin, min_windows)
             if not len(group_boxes):
                 continue
-            refined = det.box_regressor.refine(group_boxes, member_features(
-                *members[:3], kept, group_boxes, cfg.window_margin, bgr.shape[1::-1]))
-            iou_counted = (box_iou(refined[:, None], truth[~ignore][None]).max(axis=1) if (~ignore).any()
-                           else np.zeros(len(refined)))
-            iou_any = box_iou(refined[:, None], truth[None]).max(axis=1) if len(truth) else np.zeros(len(refined))
+            if refined:
+                colour_boxes = labelled = det.box_regressor.refine(group_boxes, member_features(
+                    *members[:3], kept, group_boxes, cfg.window_margin, bgr.shape[1::-1]))
+            else:
+                colour_boxes, labelled = group_boxes, scale_boxes(group_boxes, cfg.box_scale)
+            iou_counted = (box_iou(labelled[:, None], truth[~ignore][None]).max(axis=1) if (~ignore).any()
+                           else np.zeros(len(labelled)))
+            iou_any = box_iou(labelled[:, None], truth[None]).max(axis=1) if len(truth) else np.zeros(len(labelled))
             clear = (iou_counted >= 0.5) | (iou_any < 0.3)
-            rows.append(features(bgr, refined, counts, sums, best)[clear])
+            rows.append(features(bgr, colour_boxes, counts, sums, best)[clear])
             labels.append(iou_counted[clear] >= 0.5)
         print(f"training seed {seed}: {sum(len(v) for v in labels)} groups so far", flush=True)
     return np.vstack(rows), np.concatenate(labels)
@@ -198,7 +180,7 @@ def main() -> int:
     if args.trees:
         det = build_processor("detector", package_config_dir() / SETUP).detector
         train = training_scenes(args.train_scenes)
-        x, y = refined_samples(det, train, args.min_windows)
+        x, y = samples(det, train, args.min_windows, refined=True)
         verifier = fit_tree_verifier(x, y, args.rounds)
         verifier.info.update({"train_seeds": [s for s, _ in train], "cascade": Path(det.config.model).name,
                               "box_regressor": Path(det.config.box_regressor).name,
