@@ -56,7 +56,7 @@ from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
-from multi_target_tracker.verifier import Verifier, VerifierError, features
+from multi_target_tracker.verifier import TreeVerifier, Verifier, VerifierError, features, load_verifier_model
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_MODEL = "drone_vehicles_fused.json"
@@ -199,11 +199,11 @@ def load_model(cfg: DetectorConfig):
     return _MODEL_CACHE[key]
 
 
-def load_verifier(cfg: DetectorConfig) -> Verifier | None:
+def load_verifier(cfg: DetectorConfig) -> Verifier | TreeVerifier | None:
     """The colour verifier of ``cfg`` (None when ``cfg.verifier`` is empty)."""
     if not cfg.verifier:
         return None
-    return Verifier.load(resolve_model(cfg.verifier))
+    return load_verifier_model(resolve_model(cfg.verifier))
 
 
 def load_box_regressor(cfg: DetectorConfig) -> BoxRegressor | None:
@@ -532,11 +532,13 @@ class Detector:
         cfg = self.config
         members = group_members(boxes, margins, cfg.group_iou)
         kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
-        logit = self.verifier.logit(features(bgr, group_boxes, counts, margin_sums, best))
+        refined = group_boxes
         if self.box_regressor is not None and len(group_boxes):
-            group_boxes = self.box_regressor.refine(group_boxes, member_features(
+            refined = self.box_regressor.refine(group_boxes, member_features(
                 members[0], members[1], members[2], kept, group_boxes, margin_floor, bgr.shape[1::-1]))
-        return group_boxes, logit
+        colour_box = refined if self.verifier.colour_box == "refined" else group_boxes
+        logit = self.verifier.logit(features(bgr, colour_box, counts, margin_sums, best))
+        return refined, logit
 
     def _regressed(self, boxes: np.ndarray, margins: np.ndarray, frame_size: tuple[int, int], margin_floor: float):
         """:func:`group_windows` with each group's mean box refined by the box regressor before containment
