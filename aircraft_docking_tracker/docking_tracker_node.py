@@ -180,11 +180,14 @@ class DockingProcessor(MessageProcessor):
     def status(self) -> dict:
         """Diagnostic values, with the static-camera extent's counts since the last start (how many
         frames corrected X̂, and why the others did not: moving camera, still target, no or implausible
-        silhouette, refused by the appearance) and, with ``shape_prior`` silhouette, the shape prior's."""
+        silhouette, refused by the appearance), with ``start_refit`` the start re-fit's (re-fitted, or why
+        not) and, with ``shape_prior`` silhouette, the shape prior's."""
         values = {"docking state": STATE_NAMES[self.last.state], "score": f"{self.last.score:.3f}",
                   "particles last frame": self.last.particles, "track starts": self.starts,
                   "method": self.tracker.config.method}
         values.update({f"extent {name}": count for name, count in self.tracker.filter.extent_counts.items()})
+        if self.tracker.config.start_refit > 0:
+            values.update({f"start re-fit {name}": count for name, count in self.tracker.filter.start_counts.items()})
         if self.tracker.config.shape_prior == "silhouette":       # frames whose silhouette moved the shape prior
             values.update({f"shape {name}": count for name, count in self.tracker.filter.shape_counts.items()})
         return values

@@ -324,7 +324,8 @@ class AffineParticleFilter:
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
-        self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0}
+        self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
+                             "invalid": 0}
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "still": 0, "none": 0, "implausible": 0, "refused": 0}
 
     # ------------------------------------------------------------------ shared building blocks
@@ -634,7 +635,8 @@ class AffineParticleFilter:
         changed (as if the track had started on the re-fitted box), the estimator, statistics and particles
         at the moved X̂ on this frame. None, counted in ``start_counts``: a moving camera or a foreground not trusted on this
         frame, no silhouette, no axis (elongation below ``start_min_elongation``), too much moving outside
-        (``start_max_outside``: rain, a moving camera), or no rectangle of positive sides fits the box."""
+        (``start_max_outside``: rain, a moving camera), no rectangle of positive sides fits the box, or the
+        re-fitted state is not a valid one (``invalid``)."""
         cfg, box = self.config, self._start_box
         if not self._static_camera or self.background.foreground is None:
             self.start_counts["untrusted"] += 1
@@ -659,6 +661,7 @@ class AffineParticleFilter:
         change = ag.inverse(box) @ fitted
         moved = estimate @ change
         if not self._valid(moved[None])[0]:
+            self.start_counts["invalid"] += 1
             return None
         self.start_counts["refitted"] += 1
         current = self._image, self._level, self._frame_shape
