@@ -23,6 +23,14 @@ pytestmark = pytest.mark.ros
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
 
+def chatter_bag(path, count: int):
+    """A file of ``count`` /chatter strings "0", "1", ... 10 ms apart."""
+    with BagWriter(path) as writer:
+        for i in range(count):
+            writer.write("/chatter", String(data=str(i)), 1_000_000_000 + i * 10_000_000)
+    return path
+
+
 def make_image(i):
     msg = numpy_to_image(np.full((24, 32, 3), i, np.uint8), "bgr8")
     msg.header.stamp, msg.header.frame_id = ns_to_stamp(1_000_000_000 + i * 100_000_000), "camera"
@@ -105,10 +113,7 @@ def test_a_rosbags_written_file_plays_onto_live_topics(tmp_path):
 
 def test_player_waits_for_every_expected_subscriber_before_the_first_message(tmp_path):
     """--min-subscribers: a node and a recorder that joins late both get the first, volatile message."""
-    path = tmp_path / "t.mcap"
-    with BagWriter(path) as writer:
-        for i in range(3):
-            writer.write("/chatter", String(data=str(i)), 1_000_000_000 + i * 10_000_000)
+    path = chatter_bag(tmp_path / "t.mcap", 3)
     with ros_context() as (ctx, executor):
         early, late = (rclpy.create_node(name, context=ctx) for name in ("early", "late"))
         executor.add_node(early)
@@ -129,10 +134,7 @@ def test_player_waits_for_every_expected_subscriber_before_the_first_message(tmp
 
 
 def test_player_honours_start_duration_and_loop(tmp_path):
-    path = tmp_path / "t.mcap"
-    with BagWriter(path) as writer:
-        for i in range(10):
-            writer.write("/chatter", String(data=str(i)), 1_000_000_000 + i * 10_000_000)
+    path = chatter_bag(tmp_path / "t.mcap", 10)
     with ros_context() as (ctx, executor):
         node = rclpy.create_node("player", context=ctx)
         listener = rclpy.create_node("listener", context=ctx)

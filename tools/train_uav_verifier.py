@@ -107,13 +107,18 @@ def samples(det: Detector, seeds, min_windows: int, refined: bool = False) -> tu
     return np.vstack(rows), np.concatenate(labels)
 
 
+def _scanned_frames(det: Detector, seeds) -> list:
+    """(image, truth, ignore, the cascade's raw windows) of every 4th frame of the (seed, difficulty) scenes."""
+    return [(bgr, truth, ignore, det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)))
+            for seed, difficulty in seeds for bgr, truth, ignore in scene_frames(seed, difficulty, 4)]
+
+
 def swept_point(det: Detector, seeds, min_neighbors: list[int], max_false_alarms: float,
                 thresholds=np.arange(-2.0, 6.0, 0.05)) -> dict:
     """The (min_neighbors, threshold) of best pooled detection at false alarms <= ``max_false_alarms`` on
     ``seeds``, each threshold applied before containment suppression (as ``Detector.detect``)."""
     cfg = det.config
-    frames = [(bgr, truth, ignore, det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)))
-              for seed, difficulty in seeds for bgr, truth, ignore in scene_frames(seed, difficulty, 4)]
+    frames = _scanned_frames(det, seeds)
     best = None
     for n in min_neighbors:
         det.config = dataclasses.replace(cfg, min_neighbors=n)
@@ -139,8 +144,7 @@ def swept_point(det: Detector, seeds, min_neighbors: list[int], max_false_alarms
 def operating_point(det: Detector, seeds, min_neighbors: list[int]) -> dict:
     """The (min_neighbors, threshold) of best pooled detection minus false alarms on ``seeds`` (see above)."""
     cfg = det.config
-    frames = [(bgr, truth, ignore, det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)))
-              for seed, difficulty in seeds for bgr, truth, ignore in scene_frames(seed, difficulty, 4)]
+    frames = _scanned_frames(det, seeds)
     best = None
     for n in min_neighbors:
         det.config = dataclasses.replace(cfg, min_neighbors=n)
