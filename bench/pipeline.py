@@ -113,16 +113,18 @@ def use_transport(name: str) -> str:
 UAV_MODEL = "uav_vehicles_fused.json"
 def detector_parameters() -> dict:
     """The UAV cascade for the bench's scene height (``UAV_MODEL``) if shipped, else the
-    configured default, else an OpenCV Haar cascade shipped with cv2 (the bench still measures the pipeline)."""
+    configured default, else an OpenCV Haar cascade shipped with cv2 (the bench still measures the pipeline).
+    config/detector.yaml's box regressor belongs to the drone-view model: dropped with any other model."""
     for model in (UAV_MODEL, DetectorConfig().model):
         try:
             resolve_model(model)
-            return {"model": model}
+            return {"model": model} if model == DetectorConfig().model else {"model": model, "box_regressor": ""}
         except DetectorError:
             continue
     import cv2  # noqa: PLC0415
 
-    return {"backend": "opencv", "model": str(Path(cv2.data.haarcascades) / "haarcascade_frontalface_default.xml")}
+    return {"backend": "opencv", "box_regressor": "",
+            "model": str(Path(cv2.data.haarcascades) / "haarcascade_frontalface_default.xml")}
 
 
 def rss_mb(pid: int) -> float | None:

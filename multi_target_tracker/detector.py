@@ -148,9 +148,14 @@ class DetectorConfig:
         except (DetectorError, VerifierError) as exc:
             raise ConfigError(f"verifier {self.verifier!r}: {exc}", ("verifier",)) from None
         try:
-            load_box_regressor(self)
+            regressor = load_box_regressor(self)
         except (DetectorError, BoxRegressorError) as exc:
             raise ConfigError(f"box regressor {self.box_regressor!r}: {exc}", ("box_regressor",)) from None
+        for_models = regressor.info.get("for_models") if regressor is not None else None
+        if for_models and Path(self.model).name not in for_models:   # its offsets fit those models' windows only
+            raise ConfigError(f"box regressor {self.box_regressor!r} was trained for {', '.join(for_models)}, not "
+                              f"{Path(self.model).name}: set box_regressor to '' (or to one for this model)",
+                              ("box_regressor", "model"))
 
 
 def resolve_model(name: str) -> Path:
