@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker import netns
-from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
+from aircraft_docking_tracker.config import package_config_dir
 from aircraft_docking_tracker.io.bag import BagReader, BagWriter, stamp_to_ns
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table
 from aircraft_docking_tracker.offline import build_processor, run
@@ -130,10 +130,9 @@ def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
     # standard QoS override that makes the image subscriptions reliable.
     reliable = {f"qos_overrides./{CAM}/image.subscription.reliability": "reliable"}
     # config/detector.yaml, which build_processor reads for the offline run below, differs from the dataclass
-    # defaults in its drone-view box regressor (its node key does not match a namespaced node): given explicitly
-    regressor = load_yaml_parameters(package_config_dir() / "detector.yaml", "detector")["box_regressor"]
+    # defaults in its drone-view box regressor: the namespaced node reads the same file (its key is /**/detector)
     hosts.start(hosts.compute, "detector_node", "detector.log", namespace=CAM,
-                parameters={**reliable, "box_regressor": regressor})
+                params_file=package_config_dir() / "detector.yaml", parameters=reliable)
     hosts.start(hosts.compute, "association_node", "association.log", namespace=CAM)
     # the live detector's rows never restart the track (never declared lost, no override): the offline run
     # over the images alone cannot see them (with the target motion on, this scene's track scores 0.69-0.75
