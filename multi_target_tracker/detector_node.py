@@ -106,7 +106,7 @@ class DetectorProcessor(MessageProcessor):
         out = [("detections", table_to_cloud(table, msg.header)),
                ("detections/markers", boxes_to_markers(table, msg.header, "detections")),
                ("detections/image_markers", boxes_to_image_marker(table, msg.header, "detections"))]
-        if bgr is not None:
+        if self.node.annotate_image:      # bgr is there for the colour verifier too: publish only when asked
             out.append(("detections/image", numpy_to_image(draw_detections(bgr, table), "bgr8", msg.header)))
         return out
 
