@@ -18,7 +18,8 @@ of the counted vehicles (MOTA points), the misses split by cause, each in the fi
 
 Seeds: tuning seeds (``UAV_TUNING_SEEDS``: 2000-2005 difficulty 1, 2100-2101 difficulty 2) to choose on; held-out
 seeds as ``bench/uav_detector.py`` (3000-3007, 3100-3103) and the demo's seed 106, used for nothing else.
-Detections are cached per set-up and seed in ``out/uav_tracking_cache`` (delete it after changing a model).
+Detections are cached per set-up file, overrides and seed in ``out/uav_tracking_cache`` (delete it after
+changing a model file).
 Writes ``bench/results/uav_tracking.json`` and ``.md``.
 """
 from __future__ import annotations
@@ -44,6 +45,7 @@ from aircraft_docking_tracker.object_table import table_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
+from multi_target_tracker.association import clip_to_frame  # noqa: E402
 from multi_target_tracker.association_node import tracks_to_table  # noqa: E402
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
 
@@ -63,12 +65,6 @@ FULLY_VISIBLE = 0.7
 NEAR_CLASSES = ("a track of any state on it", "a published track on it once clipped to the frame")
 
 
-def clip_boxes(boxes: np.ndarray, size) -> np.ndarray:
-    """x, y, w, h boxes cut to the ``size`` (w, h) frame (empty where nothing is left: w or h 0)."""
-    x0, y0 = np.clip(boxes[:, 0], 0, size[0]), np.clip(boxes[:, 1], 0, size[1])
-    x1, y1 = np.clip(boxes[:, 0] + boxes[:, 2], 0, size[0]), np.clip(boxes[:, 1] + boxes[:, 3], 0, size[1])
-    return np.column_stack([x0, y0, x1 - x0, y1 - y0])
-
 
 def scene(seed: int, difficulty: int):
     """The demo's UAV scene for ``seed``: (stamps [s], images, ground-truth tables)."""
@@ -79,7 +75,7 @@ def scene(seed: int, difficulty: int):
 
 def detections(name: str, detector_overrides: dict, seed: int, difficulty: int, images) -> list[np.ndarray]:
     """The set-up's detections of every frame (``DETECTION_DTYPE``-like tables), cached by set-up and seed."""
-    key = hashlib.sha1(json.dumps(detector_overrides, sort_keys=True).encode()).hexdigest()[:10]
+    key = hashlib.sha1((SETUP.read_text() + json.dumps(detector_overrides, sort_keys=True)).encode()).hexdigest()[:10]
     path = CACHE / f"{name}_{key}_{seed}_{difficulty}.npz"
     if path.exists():
         stored = np.load(path)
@@ -121,7 +117,7 @@ def breakdown(truth, tables, tracks, size=(640, 480)) -> dict:
             dets = table_boxes(tables[k])
             everything = table_boxes(tracks[k])
             published = table_boxes(tracks[k][np.isin(tracks[k]["state"], cfg.states())])
-            for name, boxes in zip(NEAR_CLASSES, (everything, clip_boxes(published, size))):
+            for name, boxes in zip(NEAR_CLASSES, (everything, clip_to_frame(published, *size)[0])):
                 near[name] += int(len(boxes) > 0 and box_iou(boxes, box).max() >= cfg.iou_threshold)
             if len(dets) and box_iou(dets, box).max() >= cfg.iou_threshold:
                 misses[MISS_CLASSES[0]] += 1
