@@ -142,6 +142,10 @@ class AssociationConfig:
                                       "confirmed targets (ByteTrack's first-frame activation)")
     history_length: int = param(30, "positions kept per track (trails; tentative history for offline backfill)",
                                 low=1, high=100000)
+    frame_width: int = param(0, "image width [px]: published boxes are cut to the image (a target leaving it "
+                             "keeps its visible part, as a detector and the ground truth box it; one wholly "
+                             "outside is not published, state 4); 0: boxes not cut", low=0, high=100000)
+    frame_height: int = param(0, "image height [px] for the cut (with frame_width; 0: not cut)", low=0, high=100000)
 
 
 def seed_config(**overrides) -> AssociationConfig:
@@ -290,6 +294,18 @@ def hungarian(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # --------------------------------------------------------------------------------------------
 # Input checks
 # --------------------------------------------------------------------------------------------
+def clip_to_frame(boxes: np.ndarray, width: float, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """x, y, w, h boxes cut to the ``width`` x ``height`` image, and whether anything of each is left in it
+    (a box wholly outside is returned as it was: nothing of it can be cut to the image)."""
+    x0, y0 = np.clip(boxes[:, 0], 0.0, width), np.clip(boxes[:, 1], 0.0, height)
+    x1 = np.clip(boxes[:, 0] + boxes[:, 2], 0.0, width)
+    y1 = np.clip(boxes[:, 1] + boxes[:, 3], 0.0, height)
+    inside = (x1 > x0) & (y1 > y0)
+    out = np.column_stack([x0, y0, x1 - x0, y1 - y0])
+    out[~inside] = boxes[~inside]
+    return out, inside
+
+
 def valid_detections(boxes: np.ndarray, scores: np.ndarray) -> np.ndarray:
     """Mask of usable detections: finite numbers and positive width and height."""
     finite = np.isfinite(boxes).all(axis=1) & np.isfinite(scores)
@@ -551,9 +567,15 @@ class MultiTargetTracker:
 
     # -- read-out -----------------------------------------------------------------------------
     def tracks(self) -> Tracks:
-        return Tracks(self.ids.copy(), self.bank.boxes(), self.bank.velocities.copy(), self.scores.copy(),
-                      self.class_ids.copy(), self.ages.copy(), self.hits.copy(), self.misses.copy(),
-                      self.states.copy())
+        """Every track's box and state; with ``frame_width`` and ``frame_height`` the boxes cut to the image
+        (the filters keep the whole predicted box) and published targets wholly outside it unpublished (4)."""
+        boxes, states = self.bank.boxes(), self.states.copy()
+        cfg = self.config
+        if cfg.frame_width > 0 and cfg.frame_height > 0 and len(boxes):
+            boxes, inside = clip_to_frame(boxes, cfg.frame_width, cfg.frame_height)
+            states[~inside & np.isin(states, (CONFIRMED, COASTING))] = PREDICTED
+        return Tracks(self.ids.copy(), boxes, self.bank.velocities.copy(), self.scores.copy(),
+                      self.class_ids.copy(), self.ages.copy(), self.hits.copy(), self.misses.copy(), states)
 
     def trail(self, track_id: int) -> np.ndarray:
         """The recorded ``(frame_index, x, y, w, h, matched)`` rows of one track (oldest first)."""

@@ -85,6 +85,11 @@ class DetectorConfig:
                          "each also transposed: angles [0, 45] look along 0, 45, 90 and 135 degrees, for a model "
                          "trained on heading-aligned vehicles); a turned view's windows are mapped back as the "
                          "upright boxes of the turned windows; cascade backend only")
+    border: int = param(0, "reflected border [px] added around the upright frame (and its transpose) before the "
+                        "scan, so that windows may reach past the image edge onto a vehicle the frame cuts; their "
+                        "boxes are clipped to the frame and windows centred outside it dropped, as in the turned "
+                        "views, whose canvases hold reflected borders already; 0: windows inside the frame only",
+                        low=0, high=256)
     group_iou: float = param(0.3, "a window joins a group when it overlaps the group's best window by this "
                              "IoU", low=0.0, high=1.0)
     min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
@@ -247,11 +252,15 @@ def window_scales(window: tuple[int, int], frame_size: tuple[int, int], scale_fa
     return scales
 
 
-def turned_view(gray: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray | None]:
+def turned_view(gray: np.ndarray, angle: float, border: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
     """``gray`` turned by ``angle`` degrees about its centre on a canvas that holds all of it (borders
-    reflected), and the 2x3 affine map from the canvas back to ``gray`` (None for angle 0)."""
+    reflected), and the 2x3 affine map from the canvas back to ``gray`` (None for angle 0 without ``border``).
+    At angle 0 the canvas is ``gray`` with ``border`` reflected pixels on every side."""
     if angle % 360 == 0:
-        return gray, None
+        if border <= 0:
+            return gray, None
+        view = cv2.copyMakeBorder(gray, border, border, border, border, cv2.BORDER_REFLECT)
+        return view, np.array([[1.0, 0.0, -border], [0.0, 1.0, -border]])
     h, w = gray.shape
     c, s = abs(np.cos(np.radians(angle))), abs(np.sin(np.radians(angle)))
     size = (int(np.ceil(w * c + h * s)), int(np.ceil(w * s + h * c)))
@@ -473,7 +482,7 @@ class Detector:
         margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
         views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         if self.cascade is not None:   # every (view, level) is one job; merged in job order either way
-            turned = [turned_view(gray, angle) for angle in self.angles]
+            turned = [turned_view(gray, angle, cfg.border) for angle in self.angles]
             views = [(np.ascontiguousarray(v.T) if transposed else v, transposed, back) for v, back in turned
                      for transposed in ((False, True) if self.both_orientations else (False,))]
             jobs = [(view, transposed, back, scale) for view, transposed, back in views

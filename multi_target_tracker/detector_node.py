@@ -76,6 +76,19 @@ class DetectorProcessor(MessageProcessor):
         self.detector: Detector | None = None
         self.model_error = ""
         self.configure(config or DetectorConfig())
+        self.warm_up()
+
+    def warm_up(self) -> None:
+        """One small blank frame through the detector before the node subscribes: the compiled kernels load
+        (or compile, on a fresh checkout: seconds) now, not on the camera's first frame, which a live node
+        would otherwise spend while the frames behind it are skipped (make demo lost its first 26 UAV frames
+        so in a fresh worktree)."""
+        if self.detector is None:
+            return
+        try:
+            self.detector.detect(np.zeros((120, 160, 3) if self.detector.needs_colour else (120, 160), np.uint8))
+        except Exception:  # noqa: BLE001 - a detector that fails on frames rejects each real one with the reason
+            pass
 
     def configure(self, config: DetectorConfig) -> None:
         """(Re)load the model; on failure every frame is rejected with the reason until fixed (the
@@ -106,7 +119,7 @@ class DetectorProcessor(MessageProcessor):
         out = [("detections", table_to_cloud(table, msg.header)),
                ("detections/markers", boxes_to_markers(table, msg.header, "detections")),
                ("detections/image_markers", boxes_to_image_marker(table, msg.header, "detections"))]
-        if bgr is not None:
+        if self.node.annotate_image:      # bgr is there for the colour verifier too: publish only when asked
             out.append(("detections/image", numpy_to_image(draw_detections(bgr, table), "bgr8", msg.header)))
         return out
 

@@ -343,3 +343,21 @@ def test_first_frame_detections_start_confirmed():
     off = run(MultiTargetTracker(AssociationConfig(confirm_first_frame=False, confirm_length=3)), frames)
     assert len(on[0].tracks.visible()) == 2 and len(off[0].tracks.visible()) == 0
     assert state_of(on[2], 3) == TENTATIVE                      # later newcomers still need l_t detections
+
+
+def test_published_boxes_cut_to_the_frame_as_a_target_leaves_it():
+    """With frame_width / frame_height a target driving out of the image is published with its visible part
+    (the box a detector and the ground truth give it), the filter keeps predicting the whole box, and once
+    nothing of it is left in the image it is not published (state 4); without them boxes are not cut."""
+    frames = [[box(60.0 + 10.0 * k, 50.0, 20.0, 10.0)] for k in range(5)] + [[]] * 5    # image 100 x 80
+    settings = dict(coast_output_frames=5, coast_output_std=1e6)
+    cut = run(MultiTargetTracker(AssociationConfig(frame_width=100, frame_height=80, **settings)), frames)
+    whole = run(MultiTargetTracker(AssociationConfig(**settings)), frames)
+    for a, b in zip(cut, whole):
+        assert len(a.tracks) == len(b.tracks) == 1
+        x, y, w, h = a.tracks.boxes[0]
+        assert (x >= 0 and y >= 0 and x + w <= 100 + 1e-9 and y + h <= 80 + 1e-9) or a.tracks.states[0] == PREDICTED
+        assert b.tracks.boxes[0][2] == pytest.approx(20.0, abs=2.0)      # the filter's box stays whole
+    assert cut[4].tracks.boxes[0][2] == pytest.approx(10.0, abs=3.0)      # centre near 100: half of it left
+    assert cut[4].tracks.states[0] == CONFIRMED
+    assert cut[-1].tracks.states[0] == PREDICTED and whole[-1].tracks.states[0] == COASTING

@@ -122,3 +122,22 @@ def test_turned_view_maps_an_aligned_window_back_to_the_objects_upright_box(angl
     outside = np.array([[0.0, 0.0, 20.0, 20.0]])                        # the view's corner: reflected border
     assert len(map_back(outside, np.ones(1), back, (320, 240))[0]) == 0
     assert turned_view(gray, 0.0)[1] is None and turned_view(gray, 0.0)[0] is gray
+
+
+def test_border_lets_windows_reach_past_the_frame_onto_a_cut_object():
+    """With ``border`` the upright view is the frame with reflected pixels around it: a window on a bar the
+    frame's edge cuts (centre inside the frame) maps back as the bar's visible part, a window centred in the
+    reflected border is dropped; without it the frame itself is scanned (the default set-up unchanged)."""
+    from multi_target_tracker.detector import map_back, turned_view
+
+    gray = np.zeros((240, 320), np.uint8)
+    gray[100:130, 290:320] = 255                                      # 30 of a 60-px bar, cut by the right edge
+    view, back = turned_view(gray, 0.0, 32)
+    assert view.shape == (240 + 64, 320 + 64)
+    assert (view[132:162, 322:382] == 255).all()                      # the reflection makes the bar whole again
+    window = np.array([[290.0 + 32 - 5, 100.0 + 32, 60.0, 30.0]])     # on the whole (reflected) bar
+    boxes, _ = map_back(window, np.ones(1), back, (320, 240))
+    assert len(boxes) == 1 and box_iou(boxes[0], np.array([290.0, 100.0, 30.0, 30.0])) > 0.8
+    outside = np.array([[320.0 + 32 + 1, 100.0 + 32, 24.0, 30.0]])    # centred in the border
+    assert len(map_back(outside, np.ones(1), back, (320, 240))[0]) == 0
+    assert turned_view(gray, 0.0, 0)[1] is None and turned_view(gray, 0.0, 0)[0] is gray

@@ -80,6 +80,19 @@ def test_processor_detects_strides_and_rejects(model, scenes):
     assert stats.rejected_total == 2 and "no detector model" in next(reversed(stats.rejected))
 
 
+def test_colour_verifier_set_up_publishes_only_declared_topics():
+    """The UAV set-up's verifier reads colour; without annotate_image no annotated image is produced (the node
+    logged every such frame as an undeclared topic and drew it for nothing)."""
+    from aircraft_docking_tracker.offline import build_processor  # noqa: PLC0415
+
+    proc = build_processor("detector", package_config_dir() / "uav_camera.yaml")
+    assert proc.detector.needs_colour and not proc.node.annotate_image
+    image = np.random.default_rng(3).integers(0, 255, (120, 160, 3), np.uint8)
+    out = process_guarded(proc, "image", numpy_to_image(image, "bgr8", header(0)), ProcessingStats())
+    assert [t for t, _ in out] == ["detections", "detections/markers", "detections/image_markers"]
+    assert set(proc.outputs) == {t for t, _ in out}
+
+
 def test_compressed_input(model, scenes):
     proc = DetectorProcessor(DetectorConfig(model=model, **TINY_DETECTOR), DetectorNodeConfig(compressed=True))
     assert proc.inputs == {"image": "sensor_msgs/msg/CompressedImage"}
