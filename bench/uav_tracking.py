@@ -212,13 +212,15 @@ def markdown(results: dict) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", default="all", choices=("tuning", "held-out", "demo", "all"))
+    parser.add_argument("--quick", action="store_true", help="the demo's seed only (make bench --quick; about a minute)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=node.key:json,...",
                         help="a variant beside the set-up: detector.* / association.* parameter overrides")
     parser.add_argument("--out", default=str(HERE / "results" / "uav_tracking"), help="results path without suffix")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     variants = parse_variants(args.set)
-    groups = list(SEEDS) if args.seeds == "all" else [args.seeds]
+    seeds = "demo" if args.quick else args.seeds
+    groups = list(SEEDS) if seeds == "all" else [seeds]
     results = {"setup": SETUP.name, "variants": {k: {"detector": d, "association": a} for k, (d, a) in variants.items()},
                "groups": {}}
     for group in groups:
