@@ -30,7 +30,8 @@
   (``CASCADE_ONLY``, the set-up before it), the previous heading-aligned set-up (``PREVIOUS``),
   the upright set-up before it at this altitude (upright 3:2 model, 0 and 90 degrees only: ``UPRIGHT``) and
   the former set-up (21x14 model at the default altitude, windows from 14 px), and the set-up before the box
-  regressor (``VERIFIER_ONLY``: the verifier on the groups' mean boxes).
+  regressor (``VERIFIER_ONLY``: the logistic verifier on the groups' mean boxes) and the set-up before the tree
+  verifier (``LOGISTIC``: the logistic verifier with the box regressor).
 * **Why vehicles are missed** (tuning seeds): each counted vehicle of the set-up and of ``VERIFIER_ONLY`` found,
   or the first reason of :data:`MISS_CLASSES` that fits (no group on it, too few windows, a group the verifier
   rejects, a group or detection off it at IoU 0.3-0.5, dropped as contained in a better one).
@@ -79,7 +80,10 @@ PREVIOUS = {"verifier": "", "box_regressor": "", "model": "uav_vehicles_heading.
 # the set-up before the colour verifier: the cascade's window count alone, its operating point (tuning seeds)
 CASCADE_ONLY = {"verifier": "", "box_regressor": "", "min_neighbors": 8, "containment": 0.4, "box_scale": 0.9}
 # the set-up before the box regressor (session 8): the verifier on the groups' mean boxes, its operating point
-VERIFIER_ONLY = {"box_regressor": "", "min_neighbors": 3, "containment": 0.4, "box_scale": 0.9}
+VERIFIER_ONLY = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217, "box_regressor": "",
+                 "min_neighbors": 3, "containment": 0.4, "box_scale": 0.9}
+# the set-up before the tree verifier (session 9): the logistic verifier, with the box regressor
+LOGISTIC = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217}
 UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
            "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 HEIGHTS = (1.0, 2.0, 2.5, 3.0, 4.0)
@@ -297,12 +301,13 @@ def main() -> int:
     previous = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **PREVIOUS}))
     cascade_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **CASCADE_ONLY}))
     verifier_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **VERIFIER_ONLY}))
+    logistic = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **LOGISTIC}))
     other = (Detector(from_mapping(DetectorConfig, {**_fields(det.config), "model": args.other_seed_model}))
              if args.other_seed_model else None)
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
-               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "cascade_only": [], "verifier_only": [], "previous": [], "upright": [], "former": [], "other_seed": [],
+               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
                "other_seed_model": args.other_seed_model}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
@@ -316,6 +321,7 @@ def main() -> int:
         results["full_pyramid"].append(run(full, items[::4]))      # speed and false alarms without the size prior
         results["cascade_only"].append(run(cascade_only, items))
         results["verifier_only"].append(run(verifier_only, items))
+        results["logistic"].append(run(logistic, items))
         results["upright"].append(run(upright, items))
         results["previous"].append(run(previous, items))
         if other is not None:
@@ -325,13 +331,13 @@ def main() -> int:
         r = results["setup_results"][-1]
         print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
               f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
-    for key in ("setup_results", "full_pyramid", "cascade_only", "verifier_only", "previous", "upright", "former", "other_seed"):
+    for key in ("setup_results", "full_pyramid", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
         if results[key]:
             results[key + "_summary"] = spread(results[key])
     # group confidences of the verifier's groups as they were compared (mean boxes, box_scale 0.9)
     results["confidences"] = confidence_summary(confidence_runs(verifier_only, TUNING),
                                                 confidence_runs(verifier_only, seeds))
-    results["misses"] = {"tuning": miss_breakdown({"setup": det, "verifier_only": verifier_only}, TUNING)}
+    results["misses"] = {"tuning": miss_breakdown({"setup": det, "logistic": logistic, "verifier_only": verifier_only}, TUNING)}
     results["setup_results_difficulty_1_summary"] = spread(
         [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
     (HERE / "results").mkdir(exist_ok=True)
@@ -381,7 +387,9 @@ def markdown(results: dict) -> str:
              line("same model, every window size (no altitude prior; every 4th frame)", full),
              *([line(f"same recipe, another training seed ({Path(results['other_seed_model']).name})",
                      results["other_seed_summary"])] if "other_seed_summary" in results else []),
-             line("same cascade and verifier without the box regressor (mean boxes, box_scale 0.9, min_neighbors 3, "
+             line("logistic colour verifier (mean box's colour, threshold 1.217) with the box regressor: the set-up "
+                  "before the tree verifier", results["logistic_summary"]),
+             line("logistic verifier without the box regressor (mean boxes, box_scale 0.9, min_neighbors 3, "
                   "containment 0.4: the set-up before it)", results["verifier_only_summary"]),
              line("same cascade without the colour verifier (window count, min_neighbors 8: the set-up before the "
                   "verifier)", results["cascade_only_summary"]),

@@ -33,7 +33,9 @@ also passes windows a little inside the object (their texture is the object's), 
 window can sit inside it; the UAV set-up calibrates this on its tuning scenes.
 With a colour ``verifier`` (the UAV set-up's, :mod:`verifier`) the groups of at least ``min_neighbors``
 windows are kept by its log odds instead of their count, and a ``box_regressor`` (:mod:`box_regression`)
-then moves each kept group's box edges by offsets predicted from where its member windows lie.
+then moves each kept group's box edges by offsets predicted from where its member windows lie; without a
+verifier a ``box_regressor`` moves the boxes of the groups of at least ``min_neighbors`` windows the same way
+(before containment; measured on the drone-view prefix folds by ``bench/detector.py --box-regression``).
 On the drone-view tiles this grouping, against keeping the best window of each cluster, took
 detection at <= 10 % false alarms from 70 % to 91 % with the same cascade (bench/README.md).
 """
@@ -54,7 +56,7 @@ from aircraft_docking_tracker.object_table import DETECTION_DTYPE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
-from multi_target_tracker.verifier import Verifier, VerifierError, features
+from multi_target_tracker.verifier import TreeVerifier, Verifier, VerifierError, features, load_verifier_model
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_MODEL = "drone_vehicles_fused.json"
@@ -102,10 +104,10 @@ class DetectorConfig:
                           "probability; needs colour images and the cascade backend (the UAV set-up's)")
     verifier_threshold: float = param(0.0, "log odds a group needs from the verifier to be a detection (chosen on "
                                       "tuning scenes)", low=-50.0, high=50.0)
-    box_regressor: str = param("", "box regressor of the verified groups (JSON model; a bare name is looked up in "
+    box_regressor: str = param("", "box regressor of the groups (JSON model; a bare name is looked up in "
                                "multi_target_tracker/models; empty: none): moves each edge of a group's mean box by "
-                               "an offset predicted from its member windows, before containment and box_scale; needs "
-                               "the verifier (the UAV set-up's)")
+                               "an offset predicted from its member windows, before containment and box_scale; "
+                               "cascade backend only (the UAV set-up's, after its verifier)")
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -131,8 +133,8 @@ class DetectorConfig:
             raise ConfigError("angles other than 0 need the cascade backend", ("angles", "backend"))
         if self.verifier and self.backend != "cascade":
             raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
-        if self.box_regressor and not self.verifier:
-            raise ConfigError("a box regressor needs the verifier", ("box_regressor", "verifier"))
+        if self.box_regressor and self.backend != "cascade":
+            raise ConfigError("a box regressor needs the cascade backend", ("box_regressor", "backend"))
         if self.min_size > 0 and self.max_size > 0 and self.min_size > self.max_size:
             raise ConfigError(f"min_size={self.min_size} must not exceed max_size={self.max_size}",
                               ("min_size", "max_size"))
@@ -197,11 +199,11 @@ def load_model(cfg: DetectorConfig):
     return _MODEL_CACHE[key]
 
 
-def load_verifier(cfg: DetectorConfig) -> Verifier | None:
+def load_verifier(cfg: DetectorConfig) -> Verifier | TreeVerifier | None:
     """The colour verifier of ``cfg`` (None when ``cfg.verifier`` is empty)."""
     if not cfg.verifier:
         return None
-    return Verifier.load(resolve_model(cfg.verifier))
+    return load_verifier_model(resolve_model(cfg.verifier))
 
 
 def load_box_regressor(cfg: DetectorConfig) -> BoxRegressor | None:
@@ -451,7 +453,7 @@ class Detector:
         self.pool = ThreadPoolExecutor(cfg.threads, "detector") if cfg.threads > 1 else None
         try:
             self.verifier = load_verifier(cfg) if self.cascade is not None else None
-            self.box_regressor = load_box_regressor(cfg) if self.verifier is not None else None
+            self.box_regressor = load_box_regressor(cfg) if self.cascade is not None else None
         except (VerifierError, BoxRegressorError) as exc:
             raise DetectorError(str(exc)) from None
 
@@ -508,6 +510,9 @@ class Detector:
         if self.verifier is not None:
             boxes, scores = self._verified(image[y0:y0 + gray.shape[0], x0:x0 + gray.shape[1]], boxes, scores,
                                            cfg.window_margin if last_stage_margin is None else last_stage_margin)
+        elif self.box_regressor is not None:
+            boxes, scores = self._regressed(boxes, scores, gray.shape[::-1],
+                                            cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.cascade is not None:
             boxes, scores = group_windows(boxes, scores, cfg.group_iou, cfg.min_neighbors, cfg.containment,
                                           cfg.max_detections)
@@ -527,11 +532,27 @@ class Detector:
         cfg = self.config
         members = group_members(boxes, margins, cfg.group_iou)
         kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
-        logit = self.verifier.logit(features(bgr, group_boxes, counts, margin_sums, best))
+        refined = group_boxes
         if self.box_regressor is not None and len(group_boxes):
-            group_boxes = self.box_regressor.refine(group_boxes, member_features(
+            refined = self.box_regressor.refine(group_boxes, member_features(
                 members[0], members[1], members[2], kept, group_boxes, margin_floor, bgr.shape[1::-1]))
-        return group_boxes, logit
+        colour_box = refined if self.verifier.colour_box == "refined" else group_boxes
+        logit = self.verifier.logit(features(bgr, colour_box, counts, margin_sums, best))
+        return refined, logit
+
+    def _regressed(self, boxes: np.ndarray, margins: np.ndarray, frame_size: tuple[int, int], margin_floor: float):
+        """:func:`group_windows` with each group's mean box refined by the box regressor before containment
+        (no verifier: the drone-view set-up's)."""
+        cfg = self.config
+        members = group_members(boxes, margins, cfg.group_iou)
+        kept, group_boxes, counts, _, best = members_stats(*members, margin_floor, cfg.min_neighbors)
+        if not len(group_boxes):
+            return np.zeros((0, 4)), np.zeros(0)
+        group_boxes = self.box_regressor.refine(group_boxes, member_features(
+            members[0], members[1], members[2], kept, group_boxes, margin_floor, frame_size))
+        scores = counts + expit(best)
+        keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
+        return group_boxes[keep], scores[keep]
 
     def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
         """The :meth:`candidates` that the colour verifier accepts, scored by its probability, contained ones dropped."""

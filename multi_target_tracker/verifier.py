@@ -13,6 +13,12 @@ of B, G, R; the saturation-weighted hue as cos / sin; mean saturation; standard 
 and the group's log window count, log(1 + summed margins above ``window_margin``) and best margin.
 It is trained by ``tools/train_uav_verifier.py`` on the training scenes' groups (labelled by the
 ground truth), its threshold chosen on the tuning scenes. The model file is JSON (never pickle).
+
+:class:`TreeVerifier` (version 2) scores the same features with boosted depth-2 regression trees
+(Newton steps on the logistic loss, :func:`fit_tree_verifier`): the vehicles' paints are several
+colours (white, black, red, blue, brown) among green canopy and grey roads, which one linear boundary
+in colour space cannot carve out. Its colour is read in the box regressor's refined box
+(``colour_box`` "refined"; the logistic regression's in the groups' mean box).
 """
 from __future__ import annotations
 
@@ -80,6 +86,7 @@ class Verifier:
     weights: np.ndarray
     bias: float
     info: dict = field(default_factory=dict)
+    colour_box = "mean"      # the box whose colour it reads: the group's mean box
 
     def logit(self, features: np.ndarray) -> np.ndarray:
         """Log odds that each row of ``features`` (n x len(FEATURES)) is a vehicle."""
@@ -119,6 +126,82 @@ class Verifier:
         return load_json_model(path, cls.from_dict, VerifierError, "verifier")
 
 
+TREE_VERIFIER_VERSION = 2
+COLOUR_BOXES = ("mean", "refined")
+
+
+@dataclass
+class TreeVerifier:
+    """Boosted depth-2 regression trees over :data:`FEATURES` (version 2 of the verifier's JSON).
+
+    Tree ``k`` splits at its root on ``feature[k, 0] <= threshold[k, 0]``, then on node 1 (left) or 2 (right);
+    its 4 leaves hold the log-odds steps, summed with ``bias``. A node that does not split has threshold
+    +inf (every row goes left)."""
+
+    feature: np.ndarray      # (trees, 3) int
+    threshold: np.ndarray    # (trees, 3)
+    leaf: np.ndarray         # (trees, 4)
+    bias: float
+    colour_box: str = "refined"
+    info: dict = field(default_factory=dict)
+
+    def logit(self, features: np.ndarray) -> np.ndarray:
+        """Log odds that each row of ``features`` (n x len(FEATURES)) is a vehicle."""
+        x = np.asarray(features, np.float64).reshape(-1, len(FEATURES))
+        if not len(self.leaf):
+            return np.full(len(x), self.bias)
+        root = x[:, self.feature[:, 0]] > self.threshold[:, 0]                  # (n, trees): went right
+        node = np.where(root, 2, 1)
+        trees = np.arange(len(self.leaf))
+        child = x[np.arange(len(x))[:, None], self.feature[trees, node]] > self.threshold[trees, node]
+        return self.leaf[trees, 2 * root + child].sum(axis=1) + self.bias
+
+    def to_dict(self) -> dict:
+        return {"format": VERIFIER_FORMAT, "version": TREE_VERIFIER_VERSION, "features": list(FEATURES),
+                "colour_box": self.colour_box, "feature": self.feature.tolist(),
+                "threshold": [[t if math.isfinite(t) else None for t in row] for row in self.threshold.tolist()],
+                "leaf": self.leaf.tolist(), "bias": float(self.bias), "info": self.info}
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TreeVerifier":
+        if not isinstance(d, dict) or d.get("format") != VERIFIER_FORMAT or d.get("version") != TREE_VERIFIER_VERSION:
+            raise VerifierError(f"not a {VERIFIER_FORMAT} version {TREE_VERIFIER_VERSION} model")
+        if list(d.get("features", ())) != list(FEATURES):
+            raise VerifierError(f"verifier features {d.get('features')} are not {list(FEATURES)}")
+        if d.get("colour_box") not in COLOUR_BOXES:
+            raise VerifierError(f"colour_box {d.get('colour_box')!r} is not one of {COLOUR_BOXES}")
+        try:
+            feature = np.asarray(d["feature"], np.int64).reshape(-1, 3)
+            threshold = np.asarray([[np.inf if t is None else t for t in row] for row in d["threshold"]],
+                                   np.float64).reshape(-1, 3)
+            leaf = np.asarray(d["leaf"], np.float64).reshape(-1, 4)
+            bias = float(d["bias"])
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
+            raise VerifierError(f"malformed tree verifier ({type(exc).__name__}: {exc})") from None
+        if not len(feature) == len(threshold) == len(leaf):
+            raise VerifierError("feature, threshold and leaf need one row per tree")
+        if ((feature < 0) | (feature >= len(FEATURES))).any():
+            raise VerifierError(f"a tree splits on a feature outside 0..{len(FEATURES) - 1}")
+        if np.isnan(threshold).any() or not np.isfinite(leaf).all() or not math.isfinite(bias):
+            raise VerifierError("the tree verifier holds a non-finite number")
+        return cls(feature, threshold, leaf, bias, d["colour_box"], dict(d.get("info", {})))
+
+
+def verifier_from_dict(d: dict) -> "Verifier | TreeVerifier":
+    """Either verifier from its JSON form (by its version)."""
+    if isinstance(d, dict) and d.get("version") == TREE_VERIFIER_VERSION:
+        return TreeVerifier.from_dict(d)
+    return Verifier.from_dict(d)
+
+
+def load_verifier_model(path: str | Path) -> "Verifier | TreeVerifier":
+    """The verifier (either kind) in the JSON file ``path``."""
+    return load_json_model(path, verifier_from_dict, VerifierError, "verifier")
+
+
 def load_json_model(path: str | Path, from_dict, error: type[ValueError], what: str):
     """``from_dict`` of the JSON file ``path``; any failure is an ``error`` naming the file and ``what`` it is."""
     try:
@@ -150,3 +233,62 @@ def fit_verifier(features: np.ndarray, labels: np.ndarray, l2: float = 1e-3) -> 
 
     w = minimize(loss, np.zeros(z.shape[1]), jac=True, method="L-BFGS-B", options={"maxiter": 1000}).x
     return Verifier(mean, std, w[:-1], float(w[-1]), {"samples": int(len(y)), "positives": int(y.sum()), "l2": l2})
+
+
+def fit_tree_verifier(features: np.ndarray, labels: np.ndarray, rounds: int = 150, learning_rate: float = 0.1,
+                      bins: int = 32, l2: float = 1.0, min_leaf: int = 10, colour_box: str = "refined") -> TreeVerifier:
+    """Boosted depth-2 trees (Newton steps on the logistic loss, the two classes weighted equally) of ``labels``
+    on ``features``: each node's split the best gain over ``bins`` quantile thresholds of every feature,
+    leaves -G / (H + ``l2``) shrunk by ``learning_rate``, nodes of fewer than ``min_leaf`` rows not split."""
+    x = np.asarray(features, np.float64).reshape(-1, len(FEATURES))
+    y = np.asarray(labels, bool).reshape(-1)
+    if len(x) != len(y) or y.all() or not y.any():
+        raise VerifierError("fitting needs as many labels as rows and both classes")
+    weight = np.where(y, 0.5 / y.mean(), 0.5 / (1 - y.mean()))
+    cuts = [np.unique(np.quantile(x[:, j], np.linspace(0, 1, bins + 1)[1:-1])) for j in range(x.shape[1])]
+    binned = np.column_stack([np.searchsorted(c, x[:, j], side="left") for j, c in enumerate(cuts)])
+
+    def split(rows, g, h):
+        """(feature, threshold) of the best split of ``rows`` or None."""
+        big_g, big_h, best = g[rows].sum(), h[rows].sum(), (0.0, None)
+        for j, c in enumerate(cuts):
+            if not len(c):
+                continue
+            b = binned[rows, j]
+            gl = np.cumsum(np.bincount(b, g[rows], len(c) + 1))[:-1]
+            hl = np.cumsum(np.bincount(b, h[rows], len(c) + 1))[:-1]
+            nl = np.cumsum(np.bincount(b, None, len(c) + 1))[:-1]
+            gain = gl ** 2 / (hl + l2) + (big_g - gl) ** 2 / (big_h - hl + l2) - big_g ** 2 / (big_h + l2)
+            gain[(nl < min_leaf) | (len(rows) - nl < min_leaf)] = -np.inf
+            k = int(np.argmax(gain))
+            if gain[k] > best[0]:
+                best = (float(gain[k]), (j, float(c[k])))
+        return best[1]
+
+    score = np.zeros(len(y))
+    feature, threshold, leaf = [], [], []
+    rows = np.arange(len(y))
+    for _ in range(rounds):
+        p = 1.0 / (1.0 + np.exp(-score))
+        g, h = weight * (p - y), weight * p * (1 - p)
+        f, t, v = [0, 0, 0], [np.inf] * 3, []
+        root = split(rows, g, h)
+        if root is not None:
+            f[0], t[0] = root
+        right = x[:, f[0]] > t[0]
+        for node, side in ((1, rows[~right]), (2, rows[right])):
+            child = split(side, g, h) if len(side) >= 2 * min_leaf else None
+            if child is not None:
+                f[node], t[node] = child
+        for side in (~right, right):
+            second = x[:, f[2 if side is right else 1]] > t[2 if side is right else 1]
+            for m in (side & ~second, side & second):
+                v.append(-learning_rate * g[m].sum() / (h[m].sum() + l2))
+        feature.append(f)
+        threshold.append(t)
+        leaf.append(v)
+        tree = TreeVerifier(np.array([f]), np.array([t]), np.array([v]), 0.0, colour_box)
+        score += tree.logit(x)
+    return TreeVerifier(np.array(feature, np.int64), np.array(threshold), np.array(leaf), 0.0, colour_box,
+                        {"samples": int(len(y)), "positives": int(y.sum()), "rounds": rounds,
+                         "learning_rate": learning_rate, "bins": bins, "l2": l2, "min_leaf": min_leaf})

@@ -69,7 +69,7 @@ def test_a_malformed_box_regressor_is_refused(tmp_path, change):
         BoxRegressor.load(path)
 
 
-def test_detector_with_a_box_regressor_needs_the_verifier_and_moves_the_boxes(tmp_path):
+def test_detector_with_a_box_regressor_needs_the_cascade_backend_and_moves_the_boxes(tmp_path):
     verifier = tmp_path / "v.json"
     Verifier(np.zeros(len(VERIFIER_FEATURES)), np.ones(len(VERIFIER_FEATURES)), np.zeros(len(VERIFIER_FEATURES)),
              5.0).save(verifier)                                   # accepts every group
@@ -77,8 +77,8 @@ def test_detector_with_a_box_regressor_needs_the_verifier_and_moves_the_boxes(tm
     grow[0] = (-0.1, 0.1, -0.1, 0.1)                               # every edge 10 % outwards
     regressor = tmp_path / "r.json"
     BoxRegressor(np.zeros(len(FEATURES)), np.ones(len(FEATURES)), grow).save(regressor)
-    with pytest.raises(ConfigError, match="box regressor needs the verifier"):
-        validate(DetectorConfig(box_regressor=str(regressor)))
+    with pytest.raises(ConfigError, match="box regressor needs the cascade backend"):
+        validate(DetectorConfig(backend="opencv", model="cars.xml", box_regressor=str(regressor)))
     with pytest.raises(ConfigError, match="box regressor"):
         validate(DetectorConfig(verifier=str(verifier), box_regressor=str(tmp_path / "missing.json")))
     image = np.full((240, 320, 3), 120, np.uint8)
@@ -95,3 +95,26 @@ def test_detector_with_a_box_regressor_needs_the_verifier_and_moves_the_boxes(tm
     assert len(a) == 2 and len(b) == 2
     assert np.allclose(b["w"], a["w"] * 1.2) and np.allclose(b["x"] + b["w"] / 2, a["x"] + a["w"] / 2)
     assert np.allclose(b["score"], a["score"])
+
+
+def test_a_box_regressor_without_the_verifier_moves_the_groups_and_keeps_their_scores(tmp_path):
+    """The drone-view set-up's form: no verifier, the grouped windows' boxes refined before containment."""
+    grow = np.zeros((len(FEATURES), 4))
+    grow[0] = (-0.1, 0.1, -0.1, 0.1)                               # every edge 10 % outwards
+    regressor = tmp_path / "r.json"
+    BoxRegressor(np.zeros(len(FEATURES)), np.ones(len(FEATURES)), grow).save(regressor)
+    validate(DetectorConfig(box_regressor=str(regressor)))
+    image = np.full((240, 320), 120, np.uint8)
+    windows = np.array([[50, 60, 48, 24], [54, 60, 48, 24], [50, 64, 48, 24], [200, 150, 24, 48], [204, 150, 24, 48]],
+                       float)
+    margins = np.array([2.0, 1.5, 1.2, 3.0, 2.5])
+    detectors = [Detector(DetectorConfig(min_neighbors=2, containment=1.0, window_margin=1.0, **extra))
+                 for extra in ({"box_regressor": ""}, {"box_regressor": str(regressor)})]
+    for det in detectors:
+        det.raw = lambda gray, margin: (windows, margins)
+    plain, moved = detectors
+    assert plain.box_regressor is None and moved.box_regressor is not None
+    a, b = plain.detect(image), moved.detect(image)
+    assert len(a) == 2 and len(b) == 2
+    assert np.allclose(b["w"], a["w"] * 1.2) and np.allclose(b["h"], a["h"] * 1.2)
+    assert np.allclose(b["y"] + b["h"] / 2, a["y"] + a["h"] / 2) and np.allclose(b["score"], a["score"])

@@ -9,7 +9,8 @@ import pytest
 from aircraft_docking_tracker.config import ConfigError, validate
 from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError, group_stats, group_windows
 from multi_target_tracker.verifier import (
-    FEATURES, Verifier, VerifierError, colour_features, fit_verifier, group_features)
+    FEATURES, TreeVerifier, Verifier, VerifierError, colour_features, fit_tree_verifier, fit_verifier, group_features,
+    load_verifier_model)
 
 
 def test_group_stats_counts_and_sums_the_windows_of_each_group():
@@ -92,3 +93,51 @@ def test_detector_with_a_verifier_needs_colour_and_the_cascade_backend(tmp_path)
         validate(DetectorConfig(verifier=str(tmp_path / "missing.json")))
     with pytest.raises(ConfigError, match="verifier needs the cascade backend"):
         validate(DetectorConfig(backend="opencv", model="x.xml", verifier=str(path)))
+
+
+def _two_paints(seed: int, n: int = 600):
+    """Vehicles painted red or blue (two clusters on feature 2), background between them: no one linear
+    boundary separates the classes."""
+    rng = np.random.default_rng(seed)
+    labels = rng.random(n) < 0.4
+    x = rng.normal(size=(n, len(FEATURES)))
+    x[:, 2] = np.where(labels, np.where(rng.random(n) < 0.5, 3.0, -3.0), 0.0) + rng.normal(0, 0.5, n)
+    return x, labels
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_tree_verifier_separates_two_paints_a_logistic_regression_cannot(seed, tmp_path):
+    x, labels = _two_paints(seed)
+    auc = lambda logit: (logit[labels][:, None] > logit[~labels][None, :]).mean()  # noqa: E731
+    trees = fit_tree_verifier(x, labels, rounds=60)
+    assert auc(trees.logit(x)) > 0.95 and auc(fit_verifier(x, labels).logit(x)) < 0.75
+    held_x, held_labels = _two_paints(seed + 10)                    # and on samples it was not fitted on
+    held = trees.logit(held_x)
+    assert (held[held_labels][:, None] > held[~held_labels][None, :]).mean() > 0.9
+    path = tmp_path / "t.json"
+    trees.save(path)
+    again = load_verifier_model(path)
+    assert isinstance(again, TreeVerifier) and again.colour_box == "refined"
+    assert np.allclose(again.logit(x), trees.logit(x))
+    assert isinstance(load_verifier_model(_saved(tmp_path, fit_verifier(x, labels))), Verifier)
+    with pytest.raises(VerifierError):
+        fit_tree_verifier(x, np.zeros(len(x), bool))
+
+
+def _saved(tmp_path, verifier):
+    path = tmp_path / "any.json"
+    verifier.save(path)
+    return path
+
+
+@pytest.mark.parametrize("change", [
+    {"features": ["a"]}, {"colour_box": "upright"}, {"feature": [[0, 0, 99]]}, {"leaf": [[0.0, 1.0]]},
+    {"leaf": [[0.0, float("nan"), 0.0, 0.0]]}, {"bias": "x"}, {"threshold": "abc"}])
+def test_a_malformed_tree_verifier_is_refused(tmp_path, change):
+    good = TreeVerifier(np.zeros((1, 3), np.int64), np.array([[0.0, np.inf, 1.0]]), np.zeros((1, 4)), 0.0).to_dict()
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps({**good, **change}))
+    with pytest.raises(VerifierError):
+        load_verifier_model(path)
+    path.write_text(json.dumps(good))
+    assert np.allclose(load_verifier_model(path).logit(np.zeros((2, len(FEATURES)))), 0.0)

@@ -65,10 +65,11 @@ class Hosts:
     def record(self, topics: list[str], out, log: str = "record.log") -> NodeProcess:
         return self.start(self.recorder, "mcap_record", log, args=[*topics, "-o", out])
 
-    def play(self, bag, rate: float, wait_s: float = 30) -> NodeProcess:
+    def play(self, bag, rate: float, subscribers: int = 1, wait_s: float = 30) -> NodeProcess:
+        """Play ``bag``'s images once ``subscribers`` subscriptions (nodes and recorder) have matched."""
         return self.start(self.camera, "mcap_play", "play.log",
                           args=[bag, "--topics", "image", "--remap", f"image:=/{CAM}/image", "--rate", rate,
-                                "--wait-for-subscribers", wait_s, "--delay", 3])
+                                "--wait-for-subscribers", wait_s, "--min-subscribers", subscribers, "--delay", 3])
 
     def docking_tracker(self, box, log: str = "docking.log", parameters: dict | None = None) -> NodeProcess:
         return self.start(self.compute, "docking_tracker_node", log, namespace=CAM,
@@ -135,7 +136,9 @@ def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
     alone = {"lost_after": NEVER_LOST, "override_after": 0}
     hosts.docking_tracker(box, parameters={**reliable, **alone})
     hosts.wait_recording("detections", "tracks", "docking/polygon")
-    player = hosts.play(bag, 0.2)  # 14 Hz bag: a frame every 0.36 s
+    # detector, docking tracker and recorder all matched first: the recorder subscribes only once it sees the
+    # player's publisher, and a volatile first frame published before it matched would be lost to it
+    player = hosts.play(bag, 0.2, subscribers=3)  # 14 Hz bag: a frame every 0.36 s
     assert player.wait(180) == 0, hosts.log("play.log")
     wait_until(lambda: False, 3.0)  # the last outputs and a diagnostics round reach the recorder
     hosts.stop_all()
@@ -196,7 +199,7 @@ def test_camera_link_down_for_5_s_recovers_without_restarts(hosts, tmp_path):
     hosts.record([f"/{CAM}/image", f"/{CAM}/docking/state", "/diagnostics"], recording)
     tracker = hosts.docking_tracker(first_polygon_box(bag))
     hosts.wait_recording("docking/state")
-    player = hosts.play(bag, 0.7)  # ~10 Hz, 20 s
+    player = hosts.play(bag, 0.7, subscribers=2)  # ~10 Hz, 20 s; tracker and recorder
     assert wait_until(lambda: "recording /stand1/image " in hosts.log("record.log"), 60), hosts.log("record.log")
     time.sleep(4.0)
     down_ns = time.time_ns()

@@ -32,7 +32,8 @@ def test_association_process_with_ros_args_matches_offline(tmp_path):
         assert wait_until(lambda: "recording /cam7/tracks" in (tmp_path / "record.log").read_text(), 30), \
             (tmp_path / "record.log").read_text()
         player = NodeProcess("mcap_play", args=[bag, "--topics", "detections", "--remap", "detections:=/cam7/dets_in",
-                                                "--rate", "2", "--wait-for-subscribers", "20", "--delay", "2"],
+                                                "--rate", "2", "--wait-for-subscribers", "20", "--min-subscribers", "2",
+                                                "--delay", "2"],  # the node and the recorder
                              log_path=tmp_path / "play.log").start()
         assert player.wait(120) == 0, (tmp_path / "play.log").read_text()
         time.sleep(1.5)

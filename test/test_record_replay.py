@@ -2,6 +2,7 @@
 import subprocess
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -100,6 +101,31 @@ def test_a_rosbags_written_file_plays_onto_live_topics(tmp_path):
         thread.join()
     assert [m.data for m in got] == [f"from rosbags {i}" for i in range(10)]
     assert max(abs(e) for e in player.report.timing_errors_ns) < 1e9  # sanity only, not a speed claim
+
+
+def test_player_waits_for_every_expected_subscriber_before_the_first_message(tmp_path):
+    """--min-subscribers: a node and a recorder that joins late both get the first, volatile message."""
+    path = tmp_path / "t.mcap"
+    with BagWriter(path) as writer:
+        for i in range(3):
+            writer.write("/chatter", String(data=str(i)), 1_000_000_000 + i * 10_000_000)
+    with ros_context() as (ctx, executor):
+        early, late = (rclpy.create_node(name, context=ctx) for name in ("early", "late"))
+        executor.add_node(early)
+        executor.add_node(late)
+        got = {"early": [], "late": []}
+        early.create_subscription(String, "/chatter", lambda m: got["early"].append(m.data), RELIABLE)
+        player = Player(rclpy.create_node("player", context=ctx), BagReader(path),
+                        PlayOptions(wait_for_subscribers_s=20.0, min_subscribers=2))
+        assert not player.wait_for_subscribers(0.3, 2), "one subscriber is not two"
+        thread = threading.Thread(target=player.run)
+        thread.start()
+        time.sleep(0.5)  # the player is still waiting: nothing published yet
+        assert player.report.published == 0
+        late.create_subscription(String, "/chatter", lambda m: got["late"].append(m.data), RELIABLE)
+        assert spin_until(executor, lambda: len(got["early"]) == len(got["late"]) == 3, timeout_s=15), got
+        thread.join()
+    assert got["early"] == got["late"] == ["0", "1", "2"]
 
 
 def test_player_honours_start_duration_and_loop(tmp_path):

@@ -13,6 +13,12 @@
    detection minus false alarms pooled over the tuning frames (vehicles < 70 % visible ignored, IoU >= 0.5);
    the pair with the best such value is written into the model's ``info`` (copy it into
    config/uav_camera.yaml). The evaluation seeds are not touched: bench/uav_detector.py measures them.
+
+``--trees`` (the shipped set-up since session 9b): boosted depth-2 trees (``verifier.fit_tree_verifier``)
+instead of the logistic regression, each sample's colour read in the box regressor's refined box and labelled
+by that box (the set-up's regressor; groups of at least ``--min-windows`` 2 windows), and the threshold chosen
+by an explicit sweep (each threshold applied before containment suppression, as the detector does), the one of
+best detection at false alarms <= ``--max-false-alarms`` (issue 12's target, 0.15) on the tuning seeds.
 """
 from __future__ import annotations
 
@@ -33,8 +39,11 @@ from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
-from multi_target_tracker.detector import MODELS_DIR, Detector, group_stats  # noqa: E402
-from multi_target_tracker.verifier import features, fit_verifier  # noqa: E402
+from multi_target_tracker.box_regression import member_features  # noqa: E402
+from multi_target_tracker.detector import (  # noqa: E402
+    MODELS_DIR, Detector, group_members, members_stats, suppress_contained)
+from multi_target_tracker.verifier import features, fit_tree_verifier, fit_verifier  # noqa: E402
+from scipy.special import expit  # noqa: E402
 
 SETUP = "uav_camera.yaml"
 
@@ -72,26 +81,59 @@ TUNING = ([(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] +
           [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)])
 
 
-def samples(det: Detector, seeds, min_windows: int) -> tuple[np.ndarray, np.ndarray]:
-    """Verifier features and labels of the groups of ``seeds`` (see the module docstring)."""
+def samples(det: Detector, seeds, min_windows: int, refined: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Verifier features and labels of the groups of ``seeds`` (see the module docstring); with ``refined`` each
+    group's box refined by ``det.box_regressor``, its colour read and its label given there (``--trees``)."""
     cfg = det.config
     rows, labels = [], []
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, 8):
-            boxes, margins = det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
-            group_boxes, counts, sums, best = group_stats(boxes, margins, cfg.group_iou, cfg.window_margin,
-                                                          min_count=min_windows)
+            members = group_members(*det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)), cfg.group_iou)
+            kept, group_boxes, counts, sums, best = members_stats(*members, cfg.window_margin, min_windows)
             if not len(group_boxes):
                 continue
-            scaled = scale_boxes(group_boxes, cfg.box_scale)
-            iou_counted = (box_iou(scaled[:, None], truth[~ignore][None]).max(axis=1) if (~ignore).any()
-                           else np.zeros(len(scaled)))
-            iou_any = box_iou(scaled[:, None], truth[None]).max(axis=1) if len(truth) else np.zeros(len(scaled))
+            if refined:
+                colour_boxes = labelled = det.box_regressor.refine(group_boxes, member_features(
+                    *members[:3], kept, group_boxes, cfg.window_margin, bgr.shape[1::-1]))
+            else:
+                colour_boxes, labelled = group_boxes, scale_boxes(group_boxes, cfg.box_scale)
+            iou_counted = (box_iou(labelled[:, None], truth[~ignore][None]).max(axis=1) if (~ignore).any()
+                           else np.zeros(len(labelled)))
+            iou_any = box_iou(labelled[:, None], truth[None]).max(axis=1) if len(truth) else np.zeros(len(labelled))
             clear = (iou_counted >= 0.5) | (iou_any < 0.3)
-            rows.append(features(bgr, group_boxes, counts, sums, best)[clear])
+            rows.append(features(bgr, colour_boxes, counts, sums, best)[clear])
             labels.append(iou_counted[clear] >= 0.5)
         print(f"training seed {seed}: {sum(len(v) for v in labels)} groups so far", flush=True)
     return np.vstack(rows), np.concatenate(labels)
+
+
+def swept_point(det: Detector, seeds, min_neighbors: list[int], max_false_alarms: float,
+                thresholds=np.arange(-2.0, 6.0, 0.05)) -> dict:
+    """The (min_neighbors, threshold) of best pooled detection at false alarms <= ``max_false_alarms`` on
+    ``seeds``, each threshold applied before containment suppression (as ``Detector.detect``)."""
+    cfg = det.config
+    frames = [(bgr, truth, ignore, det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)))
+              for seed, difficulty in seeds for bgr, truth, ignore in scene_frames(seed, difficulty, 4)]
+    best = None
+    for n in min_neighbors:
+        det.config = dataclasses.replace(cfg, min_neighbors=n)
+        candidates = [(det.candidates(bgr, boxes, margins, cfg.window_margin), truth, ignore)
+                      for bgr, truth, ignore, (boxes, margins) in frames]
+        for threshold in thresholds:
+            acc = DetectionAccumulator()
+            for (group_boxes, logit), truth, ignore in candidates:
+                accepted = logit >= threshold
+                kept_boxes, scores = group_boxes[accepted], expit(logit[accepted])
+                keep = suppress_contained(kept_boxes, scores, cfg.containment, cfg.max_detections)
+                acc.add_frame(scale_boxes(kept_boxes[keep], cfg.box_scale), scores[keep], truth, ignore)
+            s = acc.summary()
+            point = {"min_neighbors": n, "verifier_threshold": round(float(threshold), 3),
+                     "detection": float(s["detection_rate"]), "false_alarms": float(s["false_alarm_rate"])}
+            if point["false_alarms"] <= max_false_alarms and (best is None or point["detection"] > best["detection"]):
+                best = point
+        print(f"min_neighbors {n}: best so far {best}", flush=True)
+    det.config = cfg
+    return best
 
 
 def operating_point(det: Detector, seeds, min_neighbors: list[int]) -> dict:
@@ -129,8 +171,28 @@ def main() -> int:
     parser.add_argument("--l2", type=float, default=1e-3)
     parser.add_argument("--window-margin", type=float, default=None, help="the cascade's window_margin (default: "
                         "the set-up's)")
+    parser.add_argument("--trees", action="store_true", help="boosted trees on the refined boxes (see above)")
+    parser.add_argument("--rounds", type=int, default=150, help="boosting rounds (--trees)")
+    parser.add_argument("--max-false-alarms", type=float, default=0.15, help="false-alarm cap of the threshold "
+                        "choice (--trees)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
+    if args.trees:
+        det = build_processor("detector", package_config_dir() / SETUP).detector
+        train = training_scenes(args.train_scenes)
+        x, y = samples(det, train, args.min_windows, refined=True)
+        verifier = fit_tree_verifier(x, y, args.rounds)
+        verifier.info.update({"train_seeds": [s for s, _ in train], "cascade": Path(det.config.model).name,
+                              "box_regressor": Path(det.config.box_regressor).name,
+                              "window_margin": det.config.window_margin, "min_windows": args.min_windows})
+        det.verifier = verifier
+        verifier.info["operating_point"] = swept_point(det, TUNING, args.min_neighbors, args.max_false_alarms)
+        verifier.info["tuning_seeds"] = [s for s, _ in TUNING]
+        verifier.save(args.out)
+        print(f"wrote {args.out}: {verifier.info['positives']} vehicle / "
+              f"{verifier.info['samples'] - verifier.info['positives']} background groups; "
+              f"operating point {verifier.info['operating_point']}")
+        return 0
     det = cascade_detector({} if args.window_margin is None else {"window_margin": args.window_margin})
     train = training_scenes(args.train_scenes)
     x, y = samples(det, train, args.min_windows)

@@ -35,6 +35,7 @@ class PlayOptions:
     remap: dict[str, str] = field(default_factory=dict)
     clock_hz: float = 0.0  # 0: no /clock
     wait_for_subscribers_s: float = 0.0
+    min_subscribers: int = 1  # with wait_for_subscribers_s: this many matched subscriptions on every topic
     delay_s: float = 0.0  # after the wait: lets every subscriber finish matching (DDS discovery)
 
 
@@ -88,12 +89,18 @@ class Player:
 
         self.clock_publisher.publish(Clock(clock=ns_to_stamp(bag_ns)))
 
-    def wait_for_subscribers(self, timeout_s: float) -> bool:
+    def wait_for_subscribers(self, timeout_s: float, minimum: int = 1) -> bool:
+        """Wait until every topic has ``minimum`` matched subscriptions; False (and a warning) on timeout."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and not self._stop.is_set():
-            if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
+            if all(p.get_subscription_count() >= minimum for p in self.publishers.values()):
                 return True
             time.sleep(0.02)
+        short = {p.topic_name: p.get_subscription_count() for p in self.publishers.values()
+                 if p.get_subscription_count() < minimum}
+        if short and not self._stop.is_set():
+            self.node.get_logger().warning(
+                f"playing after {timeout_s:g} s without {minimum} subscriber(s) on {short}: early messages may be lost")
         return False
 
     def _sleep_until(self, target: float, bag_ns_at) -> None:
@@ -109,7 +116,7 @@ class Player:
 
     def run(self) -> PlayReport:
         if self.options.wait_for_subscribers_s > 0:
-            self.wait_for_subscribers(self.options.wait_for_subscribers_s)
+            self.wait_for_subscribers(self.options.wait_for_subscribers_s, self.options.min_subscribers)
         if self.options.delay_s > 0:
             self._stop.wait(self.options.delay_s)
         begin = self.reader.start_ns + int(self.options.start_offset_s * 1e9)
@@ -170,6 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="publish /clock (default 100 Hz when given) for nodes with use_sim_time")
     parser.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
                         help="wait up to S seconds for a subscriber on every topic before starting")
+    parser.add_argument("--min-subscribers", type=int, default=1, metavar="N",
+                        help="with --wait-for-subscribers: wait for N matched subscribers on every topic "
+                             "(e.g. every node and the recorder), as ros2 topic pub --wait-matching-subscriptions")
     parser.add_argument("--delay", type=float, default=0.0, metavar="S",
                         help="then wait S seconds more: a subscriber that has just appeared may not have matched "
                              "the player yet, and a volatile topic's first messages would miss it")
@@ -194,7 +204,8 @@ def main(args: list[str] | None = None) -> int:
     known = reader.error
     options = PlayOptions(rate=ns.rate, loop=ns.loop, start_offset_s=ns.start, duration_s=ns.duration,
                           topics=ns.topics, exclude=ns.exclude, remap=remap, clock_hz=ns.clock,
-                          wait_for_subscribers_s=ns.wait_for_subscribers, delay_s=ns.delay)
+                          wait_for_subscribers_s=ns.wait_for_subscribers, min_subscribers=ns.min_subscribers,
+                          delay_s=ns.delay)
     rclpy.init(args=["mcap_play", *ros_args])
     node = rclpy.create_node("mcap_play")
     try:
