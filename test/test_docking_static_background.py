@@ -354,29 +354,31 @@ def test_the_motion_pulls_the_centre_and_leaves_the_scale_to_the_appearance():
     assert defaults < 0.09, defaults
 
 
-def stop_aspect_error(frames, quads, shape_prior, seed):
-    """|aspect / true aspect - 1| at the last frame, tracked from the first polygon's axis-aligned box."""
+def late_aspect_error(frames, quads, seed, **overrides):
+    """Median |aspect / true aspect - 1| over the last 10 frames, tracked from the first polygon's axis-aligned box."""
     lo, hi = quads[0].min(axis=0), quads[0].max(axis=0)
-    # start_refit off: the re-fit turns and resizes the loose box within 5 frames, after which the start's
-    # aspect is right too (measured: error 0.066 at the stop with shape_prior start), and this compares the pulls
-    tracker = DockingTracker(DockingConfig(shape_prior=shape_prior, start_refit=0, seed=seed))
+    tracker = DockingTracker(DockingConfig(seed=seed, **overrides))
     tracker.start(frames[0], np.r_[lo, hi - lo])
-    for frame in frames[1:]:
-        r = tracker.step(frame)
-    return abs(ag.to_params(r.matrix)[3] / ag.to_params(ag.from_quad(quads[-1]))[3] - 1)
+    errors = [abs(ag.to_params(tracker.step(frame).matrix)[3] / ag.to_params(ag.from_quad(quad))[3] - 1)
+              for frame, quad in zip(frames[1:], quads[1:])]
+    return float(np.median(errors[-10:]))
 
 
-def test_the_silhouette_gives_the_aspect_a_loose_box_gets_wrong():
-    """From the loose box (the first polygon's axis-aligned box: aspect 1.36 against the truth's 1.98 on
-    this 20 deg turned approach) the aspect pull toward the start's aspect holds the wrong aspect to the
-    stop (error about 0.2); pulled toward the moving aircraft's silhouette the aspect at the stop is right.
-    Medians over 3 tracker seeds."""
+def test_the_loose_box_aspect_is_not_held_to_the_stop():
+    """From the loose box (the first polygon's axis-aligned box: aspect 1.36 against the truth's 1.98 on this
+    20 deg turned approach), pulled toward the start's aspect without the start re-fit the track holds the
+    wrong aspect to the stop (error 0.21-0.25 over the last 10 frames); with the defaults (the start re-fit,
+    the silhouette's shape prior) it does not. Medians over 3 tracker seeds, measured with OPENBLAS_CORETYPE
+    Haswell / Prescott / Sandybridge / SkylakeX: defaults 0.110 / 0.126 / 0.110 / 0.130, held 0.217 / 0.209 /
+    0.249 / 0.208. (Session 8's form of this test, the silhouette prior without the re-fit at the single stop
+    frame, was a knife edge: 0.09-0.19 by kernel; that prior overshoots the aspect late, +0.11-0.23.)"""
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
     frames, quads = scene_frames(config, 100)
-    start = np.median([stop_aspect_error(frames, quads, "start", s) for s in range(3)])
-    silhouette = np.median([stop_aspect_error(frames, quads, "silhouette", s) for s in range(3)])
-    assert silhouette < 0.1 and silhouette < start - 0.08, (start, silhouette)
+    defaults = np.median([late_aspect_error(frames, quads, s) for s in range(3)])
+    held = np.median([late_aspect_error(frames, quads, s, shape_prior="start", start_refit=0) for s in range(3)])
+    assert held > 0.17, held                                   # the loose box's aspect, held
+    assert defaults < 0.17 and defaults < held - 0.05, (defaults, held)
 
 
 def test_row_offsets_remove_a_row_wise_offset_outside_the_target_only():
