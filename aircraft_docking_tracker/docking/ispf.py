@@ -360,6 +360,11 @@ class AffineParticleFilter:
         """Whether the static-camera model (static_background.py) runs: the extent or the motion prior is on."""
         return self.config.extent_gain > 0 or self.config.motion_gain > 0
 
+    @property
+    def _measured_motion(self) -> np.ndarray | None:
+        """``motion_gain``: the target's motion M measured on this frame (static_background.target_motion), else None."""
+        return self.background.motion if self.config.motion_gain > 0 else None
+
     def _observe(self, states: np.ndarray) -> np.ndarray:
         """o(X) for every state: one remap out of the current pyramid level."""
         return ag.warp_patches(self._image, states, (self.config.template_width, self.config.template_height),
@@ -396,8 +401,8 @@ class AffineParticleFilter:
         """Particles moved by the AR(1) momentum A_{t-1} = a log(X̂_{t-2}^{-1} X̂_{t-1}) (eq. 4), or by the
         target's measured motion M (``motion_gain``, static camera): M · X."""
         cfg = self.config
-        if cfg.motion_gain > 0 and self.background.motion is not None:
-            return self.background.motion @ particles
+        if self._measured_motion is not None:
+            return self._measured_motion @ particles
         if cfg.chart == "unit" and cfg.ar_dims == "all":
             return particles @ ag.expm(cfg.ar * ag.logm(ag.inverse(self.previous) @ self.estimate))
         if cfg.chart == "unit":
@@ -611,7 +616,7 @@ class AffineParticleFilter:
         estimate, score, patch = self._estimate(states, scores, patches)  # step 7
         if self.config.scale_check > 0:
             estimate, score, patch = self._check_scale(estimate, score, patch)
-        if self.config.motion_gain > 0 and self.background.motion is not None:
+        if self._measured_motion is not None:
             step = self._motion_correction(estimate)
             if self._valid((estimate @ step)[None])[0]:
                 estimate, states = estimate @ step, states @ step
