@@ -509,7 +509,7 @@ def test_a_restart_mid_approach_keeps_what_the_stand_background_knows():
     frames: mid-approach the aircraft's uniform skin is still from frame to frame, so it is learnt as background
     and the silhouette has holes (the extent measured on 6-7 of the next 20 frames, 27 % of the aircraft
     foreground). Kept (``restart_background`` keep), the stand is known: 16-19 of 20, 59 %. Medians over 3
-    tracker seeds."""
+    tracker seeds (Haswell, Prescott, Sandybridge, SkylakeX alike)."""
     import itertools  # noqa: PLC0415
 
     import cv2  # noqa: PLC0415

@@ -69,10 +69,12 @@ class DockingConfig(FilterConfig):
                                 "override); a loose or too large detector box around the tracked aircraft is not the "
                                 "aircraft seen elsewhere")
     restart_background: str = param("keep", "a restart of a running track (lost, re-acquired, the override, a new "
-                                    "start request) on the same camera: keep = the static background goes on "
-                                    "(what the stand looks like is still known); new = it starts again, the start "
-                                    "region unknown until the aircraft has left it (session 9: mid-approach it "
-                                    "never leaves, so the extent was not measured again)", choices=("keep", "new"))
+                                    "start request) on the same camera: keep = the static background goes on (the "
+                                    "stand is still known; the extent measures the restart box from the first frame, "
+                                    "no start re-fit); refit = kept, and an axis-aligned restart box is re-fitted as a "
+                                    "first start is; new = it starts again, the restart region unknown until still for "
+                                    "5 frames (mid-approach the aircraft's uniform skin passes that test and is learnt "
+                                    "as background)", choices=("keep", "refit", "new"))
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
 
@@ -162,10 +164,11 @@ class DockingTracker:
         """Start the filter on ``frame`` at ``where`` (box, quadrilateral or state) now."""
         state = _as_state(where)
         old = self.filter
-        keep = (self.config.restart_background == "keep" and self.state != WAITING and old.config is self.config
+        keep = (self.config.restart_background != "new" and self.state != WAITING and old.config is self.config
                 and old.estimate is not None)
         self.filter = make_filter(self.config)
-        self.filter.start(frame, state, old.background if keep else None)
+        self.filter.start(frame, state, old.background if keep else None,
+                          refit=not keep or self.config.restart_background == "refit")
         self.state, self._low, self._good, self._pending = TRACKING, 0, 0, None
         self._away, self._away_box = 0, None
         return DockingResult(TRACKING, state.copy(), 1.0, 0, True, state[None].copy())
