@@ -113,6 +113,28 @@ def test_the_detector_overrides_a_track_it_keeps_seeing_the_aircraft_away_from()
     assert not any(r.started for r in run(at_truth, detection_class=2))  # another class's rows
 
 
+def test_a_detection_that_agrees_on_the_centre_restarts_nothing_with_keep_agreeing():
+    """keep_agreeing: a box twice the track's size about its centre (IoU 0.25, under override_iou) is the
+    aircraft seen where the track is: no override restart, and a lost track is not re-acquired on it; a box
+    elsewhere still restarts both. Without the option the large box restarts as before."""
+    frame, truth = next(moving_target_scene(1))
+    x, y, w, h = ag.to_box(truth)
+    large = detections((x - w / 2, y - h / 2, 2 * w, 2 * h, 0.9, 1))
+    elsewhere = detections((x + 3 * w, y + 2 * h, w, h, 0.9, 1))
+
+    def restarts(rows, state, keep_agreeing):
+        tracker = DockingTracker(DockingConfig(override_after=2, keep_agreeing=keep_agreeing, seed=0))
+        tracker.start(frame, truth)
+        tracker.state = state
+        tracker.filter.step = lambda f: FrameResult(truth, 0.9, 20, False, truth[None])
+        return any(tracker.step(frame, rows).started for _ in range(3))
+
+    for state in (TRACKING, LOST):
+        assert not restarts(large, state, True)
+        assert restarts(elsewhere, state, True)
+        assert restarts(large, state, False)
+
+
 def test_state_row():
     row = state_row(DockingResult(TRACKING, ag.from_box(0, 0, 40, 10), 0.8, 33))
     assert row.dtype == STATE_DTYPE and len(row) == 1

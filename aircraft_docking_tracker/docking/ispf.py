@@ -451,16 +451,25 @@ class AffineParticleFilter:
         self.estimator.train(self._observe(state @ ag.exp_coords(-offsets)), offsets, forget)
 
     # ------------------------------------------------------------------ start / step 7-9
-    def start(self, frame: np.ndarray, state: np.ndarray) -> None:
-        """Start on ``frame`` with the object at ``state`` (3x3): model, estimator, statistics, particles."""
+    def start(self, frame: np.ndarray, state: np.ndarray, background: StaticBackground | None = None,
+              refit: bool = True) -> None:
+        """Start on ``frame`` with the object at ``state`` (3x3): model, estimator, statistics, particles; given the
+        previous track's ``background`` (a restart on the same camera), the static background goes on from it
+        (``StaticBackground.restart``) instead of starting with the start region unknown. ``refit`` False: no
+        ``start_refit`` (it stands in for the extent while the start region is unknown; on a kept background the
+        extent acts from the first frame, and the re-fit's change, applied to X̂, came on top of it: scene 115
+        restarted at frame 34, log scale +0.22 -> -0.27 at the re-fit)."""
         state = np.asarray(state, dtype=float)
         self._load(frame, state)
         self._initialise(state)
         self._frames = 0
         axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
-        self._start_box = state.copy() if axis_aligned and self.config.start_refit > 0 else None
+        self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
         self._start_track = [(frame, state.copy())] if self._start_box is not None else []
-        if self._static_camera:
+        if self._static_camera and background is not None:
+            self.background = background
+            self.background.restart(frame, state)
+        elif self._static_camera:
             self.background.start(frame, state)
 
     def _initialise(self, state: np.ndarray, patches: np.ndarray | None = None) -> None:

@@ -191,6 +191,22 @@ class StaticBackground:
         self._stale, self.camera_moving = [], False
         self.first = [image] if self.keep_first > 0 else []
 
+    def restart(self, frame: np.ndarray, state: np.ndarray) -> None:
+        """A new track on the same camera (a restart mid-approach: lost, re-acquired, the detector override):
+        what ``B`` knows of the stand is kept (background, known pixels, still counts, the camera's stale
+        ratio and still run); only what belongs to the old track is dropped (this frame's foreground and
+        motion; the ``keep_first`` frames start again at ``frame``), and ``frame`` is learnt as any frame.
+        ``start`` instead makes the region around ``state`` unknown until the aircraft has left it; mid-approach
+        it never leaves it, so no foreground was measured there again (README, docking section, "Session 10:
+        restarts"). A frame of another size than ``B`` starts afresh."""
+        image = _level_image(frame, self.level)
+        if self.background is None or image.shape != self.background.shape:
+            self.start(frame, state)
+            return
+        self.foreground, self.trusted, self.motion = None, False, None
+        self.first = [image] if self.keep_first > 0 else []
+        self._learn(image)
+
     @property
     def target_still(self) -> bool:
         """The motion is measured on this frame and no corner under the estimate moved (``motion`` None)."""

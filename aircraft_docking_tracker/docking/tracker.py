@@ -63,6 +63,18 @@ class DockingConfig(FilterConfig):
     override_after: int = param(5, "while tracking, restart on the aircraft detection after this many frames "
                                 "in which the detector saw the aircraft only away from the track, each time at "
                                 "the same place (0: detections are ignored while tracking)", low=0, high=10000)
+    keep_agreeing: bool = param(False, "a detection that agrees with the track on the centre (its box holds the "
+                                "track's centre and the track's box holds its centre) is on the track: it restarts "
+                                "neither a lost track (re-acquisition) nor, whatever its IoU, a tracking one (the "
+                                "override); a loose or too large detector box around the tracked aircraft is not the "
+                                "aircraft seen elsewhere")
+    restart_background: str = param("keep", "a restart of a running track (lost, re-acquired, the override, a new "
+                                    "start request) on the same camera: keep = the static background goes on (the "
+                                    "stand is still known; the extent measures the restart box from the first frame, "
+                                    "no start re-fit); refit = kept, and an axis-aligned restart box is re-fitted as a "
+                                    "first start is; new = it starts again, the restart region unknown until still for "
+                                    "5 frames (mid-approach the aircraft's uniform skin passes that test and is learnt "
+                                    "as background)", choices=("keep", "refit", "new"))
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
 
@@ -151,8 +163,12 @@ class DockingTracker:
     def start(self, frame: np.ndarray, where) -> DockingResult:
         """Start the filter on ``frame`` at ``where`` (box, quadrilateral or state) now."""
         state = _as_state(where)
+        old = self.filter
+        keep = (self.config.restart_background != "new" and self.state != WAITING and old.config is self.config
+                and old.estimate is not None)
         self.filter = make_filter(self.config)
-        self.filter.start(frame, state)
+        self.filter.start(frame, state, old.background if keep else None,
+                          refit=not keep or self.config.restart_background == "refit")
         self.state, self._low, self._good, self._pending = TRACKING, 0, 0, None
         self._away, self._away_box = 0, None
         return DockingResult(TRACKING, state.copy(), 1.0, 0, True, state[None].copy())
@@ -163,7 +179,8 @@ class DockingTracker:
             return self.start(frame, self._pending)
         if self.state != TRACKING:
             box = best_detection(detections, self.config.detection_class, self.config.min_detection_score)
-            if box is not None:
+            if box is not None and not (self.state == LOST and self.config.keep_agreeing
+                                        and _agree(box[None], ag.to_box(self.filter.estimate))[0]):
                 return self.start(frame, box)
         if self.state == WAITING:
             return DockingResult(WAITING)
@@ -194,13 +211,28 @@ class DockingTracker:
         best = best_detection(rows, min_score=cfg.min_detection_score)
         if best is None:
             return None
-        if (box_iou(table_boxes(rows), ag.to_box(self.filter.estimate)) >= cfg.override_iou).any():
+        boxes, track = table_boxes(rows), ag.to_box(self.filter.estimate)
+        on_track = box_iou(boxes, track) >= cfg.override_iou
+        if cfg.keep_agreeing:
+            on_track |= _agree(boxes, track)
+        if on_track.any():
             self._away, self._away_box = 0, None
             return None
         same_place = self._away_box is not None and box_iou(best, self._away_box) >= 0.3
         self._away = self._away + 1 if same_place else 1
         self._away_box = best
         return best if self._away >= cfg.override_after else None
+
+
+def _holds(boxes: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Whether each box (x, y, w, h) holds its point (or one point for all boxes)."""
+    return ((points[..., 0] >= boxes[:, 0]) & (points[..., 0] <= boxes[:, 0] + boxes[:, 2])
+            & (points[..., 1] >= boxes[:, 1]) & (points[..., 1] <= boxes[:, 1] + boxes[:, 3]))
+
+
+def _agree(boxes: np.ndarray, track: np.ndarray) -> np.ndarray:
+    """Per box (x, y, w, h): whether it holds the centre of ``track`` (a box) and ``track`` holds its centre."""
+    return _holds(boxes, track[:2] + track[2:] / 2) & _holds(track[None], boxes[:, :2] + boxes[:, 2:] / 2)
 
 
 def _as_state(where) -> np.ndarray:
