@@ -158,6 +158,9 @@ class _Node:
     def warning(self, text):
         pass
 
+    def info(self, text):
+        pass
+
 
 def _play(path: Path) -> str:
     from aircraft_docking_tracker.io.bag import BagError, BagReader

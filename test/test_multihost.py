@@ -205,6 +205,9 @@ def test_camera_link_down_for_5_s_recovers_without_restarts(hosts, tmp_path):
     hosts.wait_recording("docking/state")
     player = hosts.play(bag, 0.7, subscribers=2)  # ~10 Hz, 20 s; tracker and recorder
     assert wait_until(lambda: "recording /stand1/image " in hosts.log("record.log"), 60), hosts.log("record.log")
+    # the player starts once the tracker and the recorder have matched, then waits its --delay: count the
+    # 4 s of frames before the drop from its first message, not from the recorder's subscription
+    assert wait_until(lambda: "playing " in hosts.log("play.log"), 60), hosts.log("play.log")
     time.sleep(4.0)
     down_ns = time.time_ns()
     hosts.net.link(hosts.camera, up=False)

@@ -119,6 +119,7 @@ class Player:
             self.wait_for_subscribers(self.options.wait_for_subscribers_s, self.options.min_subscribers)
         if self.options.delay_s > 0:
             self._stop.wait(self.options.delay_s)
+        self.node.get_logger().info(f"playing {len(self.publishers)} topic(s)")   # scripts wait for this line
         begin = self.reader.start_ns + int(self.options.start_offset_s * 1e9)
         end = begin + int(self.options.duration_s * 1e9) if self.options.duration_s else None
         topics = list(self.publishers)
