@@ -42,6 +42,27 @@ def test_waits_then_starts_from_a_detection_of_the_aircraft_class():
     assert np.linalg.norm(r.params[:2] - ag.to_params(scene[-1][1])[:2]) < 10
 
 
+def _start_refits(detected: bool, **overrides) -> int:
+    """How many start re-fits were tried over 10 frames of the moving target, started on its axis-aligned box
+    requested (initial_box) or detected (the first frame's detection)."""
+    scene = list(moving_target_scene(10))
+    box = list(ag.to_box(scene[0][1]))
+    config = DockingConfig(seed=0, override_after=0, **overrides, **({} if detected else {"initial_box": box}))
+    tracker = DockingTracker(config)
+    for k, (frame, _) in enumerate(scene):
+        tracker.step(frame, detections((*box, 0.9, -1)) if detected and k == 0 else None)
+    assert tracker.state == TRACKING
+    return sum(tracker.filter.start_counts.values())
+
+
+def test_a_detector_box_is_not_re_fitted_unless_asked():
+    """The start re-fit takes its box for the turned aircraft's bounding box: a requested box is re-fitted (tried
+    once, after start_refit frames), a detector's box only with refit_detections."""
+    assert _start_refits(detected=False) == 1
+    assert _start_refits(detected=True) == 0
+    assert _start_refits(detected=True, refit_detections=True) == 1
+
+
 def test_initial_box_parameter_and_request_start():
     frame, truth = next(moving_target_scene(1))
     box = ag.to_box(truth)
