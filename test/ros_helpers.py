@@ -54,3 +54,33 @@ def write_with_rosbags(folder, stamps_ns, texts, topic: str = "/chatter") -> Non
         conn = writer.add_connection(topic, "std_msgs/msg/String", typestore=store)
         for stamp, text in zip(stamps_ns, texts):
             writer.write(conn, stamp, store.serialize_cdr(string_type(data=text), "std_msgs/msg/String"))
+
+
+class FakePublisher:
+    """A publisher that keeps what it was given."""
+
+    def __init__(self):
+        self.sent = []
+
+    def publish(self, data):
+        self.sent.append(data)
+
+
+class FakePlayerNode:
+    """All that mcap_play's Player needs of a node, without DDS: publishers that keep their messages, and a
+    logger that keeps its lines."""
+
+    def __init__(self):
+        self.publishers: dict[str, FakePublisher] = {}
+        self.lines: list[str] = []
+
+    def create_publisher(self, cls, topic, qos):
+        return self.publishers.setdefault(topic, FakePublisher())
+
+    def get_logger(self):
+        return self
+
+    def info(self, text):
+        self.lines.append(text)
+
+    warning = info

@@ -138,39 +138,16 @@ def _read(path: Path) -> str:
     return "damaged" if reader.problem else "ok"
 
 
-class _Publisher:
-    def __init__(self):
-        self.count = 0
-
-    def publish(self, data):
-        self.count += 1
-
-
-class _Node:
-    """All that Player needs of a node, without DDS."""
-
-    def create_publisher(self, cls, topic, qos):
-        return _Publisher()
-
-    def get_logger(self):
-        return self
-
-    def warning(self, text):
-        pass
-
-    def info(self, text):
-        pass
-
-
 def _play(path: Path) -> str:
     from aircraft_docking_tracker.io.bag import BagError, BagReader
     from aircraft_docking_tracker.io.mcap_play import Player, PlayOptions
+    from ros_helpers import FakePlayerNode
 
     try:
         reader = BagReader(path)
     except BagError:
         return "refused"
-    report = Player(_Node(), reader, PlayOptions(rate=1e6)).run()
+    report = Player(FakePlayerNode(), reader, PlayOptions(rate=1e6)).run()
     return "damaged" if reader.problem else ("ok" if report.published == reader.message_count else "partial")
 
 

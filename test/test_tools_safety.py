@@ -24,6 +24,7 @@ from aircraft_docking_tracker.io.mcap_play import Player, PlayOptions
 from aircraft_docking_tracker.scenarios.messages import header, quad_to_polygon
 from multi_target_tracker import detect
 
+from ros_helpers import FakePlayerNode
 from test_docking_filter import moving_target_scene
 
 T0 = 1_000_000_000
@@ -203,21 +204,7 @@ def test_split_bag_by_duration_through_run_offline_and_the_player(tmp_path):
     offline.run(folder, out, ["docking_tracker"], progress=False)
     assert BagReader(out).topics["/image"].count == 8 and BagReader(out).topics["/docking/polygon"].count == 8
 
-    class Publisher:
-        def __init__(self):
-            self.sent = []
-
-        def publish(self, data):
-            self.sent.append(data)
-
-    class Node:  # what Player needs of a node: publishers
-        def __init__(self):
-            self.publishers = {}
-
-        def create_publisher(self, cls, topic, qos):
-            return self.publishers.setdefault(topic, Publisher())
-
-    node = Node()
+    node = FakePlayerNode()
     player = Player(node, BagReader(folder), PlayOptions(rate=100.0))
     thread = threading.Thread(target=player.run)
     thread.start()
