@@ -540,16 +540,22 @@ class Detector:
         out["score"], out["class_id"] = scores, cfg.class_id
         return out
 
-    def candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
-        """Every group of at least ``min_neighbors`` windows before the verifier decides: ``(boxes, log odds)``,
-        the boxes refined by the box regressor if one is configured (before ``box_scale``)."""
+    def _groups(self, boxes: np.ndarray, margins: np.ndarray, margin_floor: float, frame_size: tuple[int, int]):
+        """The groups of at least ``min_neighbors`` windows: ``(mean boxes, boxes refined by the box regressor (the
+        mean boxes without one), counts, margin sums, best margins)``."""
         cfg = self.config
         members = group_members(boxes, margins, cfg.group_iou)
         kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
         refined = group_boxes
         if self.box_regressor is not None and len(group_boxes):
             refined = self.box_regressor.refine(group_boxes, member_features(
-                members[0], members[1], members[2], kept, group_boxes, margin_floor, bgr.shape[1::-1]))
+                members[0], members[1], members[2], kept, group_boxes, margin_floor, frame_size))
+        return group_boxes, refined, counts, margin_sums, best
+
+    def candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """Every group of at least ``min_neighbors`` windows before the verifier decides: ``(boxes, log odds)``,
+        the boxes refined by the box regressor if one is configured (before ``box_scale``)."""
+        group_boxes, refined, counts, margin_sums, best = self._groups(boxes, margins, margin_floor, bgr.shape[1::-1])
         colour_box = refined if self.verifier.colour_box == "refined" else group_boxes
         logit = self.verifier.logit(features(bgr, colour_box, counts, margin_sums, best))
         return refined, logit
@@ -558,12 +564,9 @@ class Detector:
         """:func:`group_windows` with each group's mean box refined by the box regressor before containment
         (no verifier: the drone-view set-up's)."""
         cfg = self.config
-        members = group_members(boxes, margins, cfg.group_iou)
-        kept, group_boxes, counts, _, best = members_stats(*members, margin_floor, cfg.min_neighbors)
+        _, group_boxes, counts, _, best = self._groups(boxes, margins, margin_floor, frame_size)
         if not len(group_boxes):
             return np.zeros((0, 4)), np.zeros(0)
-        group_boxes = self.box_regressor.refine(group_boxes, member_features(
-            members[0], members[1], members[2], kept, group_boxes, margin_floor, frame_size))
         scores = counts + expit(best)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
         return group_boxes[keep], scores[keep]
