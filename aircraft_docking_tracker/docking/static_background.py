@@ -223,9 +223,7 @@ class StaticBackground:
         shift = np.inf
         if outside.sum() >= 100:             # else too little background to measure anything
             shift = self.camera_shift(image, outside)
-            b, i = self.background[outside][::7], image[outside][::7]
-            (gain, offset), *_ = np.linalg.lstsq(np.stack([b, np.ones_like(b)], 1), i, rcond=None)
-            signed = image - (gain * self.background + offset)
+            signed = image - _light_fitted(self.background, image, outside)
             difference = np.abs(signed)
             self.camera_moving = self._stale_background(difference, image, outside)
         self.still_run = self.still_run + 1 if shift <= self.motion_max_shift else 0
@@ -233,9 +231,7 @@ class StaticBackground:
             self.motion = target_motion(self._previous, image, state, self.scale)
         if shift <= self.max_shift and not self.camera_moving:
             d = cv2.blur(difference * self.known, (5, 5))
-            rest = d[outside][::5]
-            median = float(np.median(rest))
-            sigma = 1.4826 * float(np.median(np.abs(rest - median))) + 1e-3
+            median, sigma = _median_and_noise(d[outside][::5])
             threshold = median + self.k * sigma + (self.flicker if self.flicker is not None else 0.0)
             fg = np.clip((d - threshold) / (self.k * sigma), 0.0, 1.0)
             if self.flicker is not None:
@@ -297,6 +293,20 @@ class StaticBackground:
         return float(np.hypot(dx, dy))
 
 
+def _light_fitted(background: np.ndarray, image: np.ndarray, outside: np.ndarray) -> np.ndarray:
+    """``a B + c``: the background under the image's light, gain and offset fitted by least squares on every 7th
+    pixel outside the target."""
+    b, i = background[outside][::7], image[outside][::7]
+    (gain, offset), *_ = np.linalg.lstsq(np.stack([b, np.ones_like(b)], 1), i, rcond=None)
+    return gain * background + offset
+
+
+def _median_and_noise(values: np.ndarray) -> tuple[float, float]:
+    """The median of ``values`` and their robust spread ``σ = 1.4826 MAD`` (+ 1e-3: never 0)."""
+    median = float(np.median(values))
+    return median, 1.4826 * float(np.median(np.abs(values - median))) + 1e-3
+
+
 def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, z: float = 4.0, grow: float = 1.3,
                      surround: float = 1.6, min_pixels: int = 30, min_contrast: float = 1.0) -> StartSilhouette | None:
     """The silhouette of what moved inside ``state``'s rectangle over ``images`` (>= 4 frames of a still camera
@@ -310,12 +320,8 @@ def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, 
     outside = state_mask(state, surround, shape, scale) == 0
     if outside.sum() < 100:
         return None
-    b, i = first[outside][::7], last[outside][::7]
-    (gain, offset), *_ = np.linalg.lstsq(np.stack([b, np.ones_like(b)], 1), i, rcond=None)
-    d = cv2.blur(np.abs(last - (gain * first + offset)).astype(np.float32), (5, 5))
-    rest = d[outside]
-    median = float(np.median(rest))
-    sigma = 1.4826 * float(np.median(np.abs(rest - median))) + 1e-3
+    d = cv2.blur(np.abs(last - _light_fitted(first, last, outside)).astype(np.float32), (5, 5))
+    median, sigma = _median_and_noise(d[outside])
     moved = d - median > max(z * sigma, min_contrast)
     region = state_mask(state, grow, shape, scale) > 0
     mask = cv2.morphologyEx((moved & region).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
