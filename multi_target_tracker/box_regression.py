@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multi_target_tracker.verifier import load_json_model
+from multi_target_tracker.verifier import check_json_model, load_json_model
 
 BOX_REGRESSOR_FORMAT = "aircraft_docking_tracker/group-box-regressor"
 BOX_REGRESSOR_VERSION = 1
@@ -128,13 +128,7 @@ class BoxRegressor:
     @classmethod
     def from_dict(cls, d: dict) -> "BoxRegressor":
         """A regressor from its JSON form; refuses another format, other features, non-finite numbers."""
-        if not isinstance(d, dict) or d.get("format") != BOX_REGRESSOR_FORMAT:
-            raise BoxRegressorError(f"not a {BOX_REGRESSOR_FORMAT} model")
-        if d.get("version") != BOX_REGRESSOR_VERSION:
-            raise BoxRegressorError(f"box regressor version {d.get('version')} unsupported "
-                                    f"(expected {BOX_REGRESSOR_VERSION})")
-        if list(d.get("features", ())) != list(FEATURES):
-            raise BoxRegressorError(f"box regressor features {d.get('features')} are not {list(FEATURES)}")
+        check_json_model(d, BOX_REGRESSOR_FORMAT, BOX_REGRESSOR_VERSION, FEATURES, BoxRegressorError, "box regressor")
         try:
             mean, std = (np.asarray(d[k], np.float64).reshape(-1) for k in ("mean", "std"))
             weights = np.asarray(d["weights"], np.float64)

@@ -104,12 +104,7 @@ class Verifier:
     @classmethod
     def from_dict(cls, d: dict) -> "Verifier":
         """A verifier from its JSON form; refuses another format, other features, non-finite numbers."""
-        if not isinstance(d, dict) or d.get("format") != VERIFIER_FORMAT:
-            raise VerifierError(f"not a {VERIFIER_FORMAT} model")
-        if d.get("version") != VERIFIER_VERSION:
-            raise VerifierError(f"verifier version {d.get('version')} unsupported (expected {VERIFIER_VERSION})")
-        if list(d.get("features", ())) != list(FEATURES):
-            raise VerifierError(f"verifier features {d.get('features')} are not {list(FEATURES)}")
+        check_json_model(d, VERIFIER_FORMAT, VERIFIER_VERSION, FEATURES, VerifierError, "verifier")
         try:
             arrays = [np.asarray(d[k], np.float64).reshape(-1) for k in ("mean", "std", "weights")]
             bias = float(d["bias"])
@@ -167,10 +162,7 @@ class TreeVerifier:
 
     @classmethod
     def from_dict(cls, d: dict) -> "TreeVerifier":
-        if not isinstance(d, dict) or d.get("format") != VERIFIER_FORMAT or d.get("version") != TREE_VERIFIER_VERSION:
-            raise VerifierError(f"not a {VERIFIER_FORMAT} version {TREE_VERIFIER_VERSION} model")
-        if list(d.get("features", ())) != list(FEATURES):
-            raise VerifierError(f"verifier features {d.get('features')} are not {list(FEATURES)}")
+        check_json_model(d, VERIFIER_FORMAT, TREE_VERIFIER_VERSION, FEATURES, VerifierError, "tree verifier")
         if d.get("colour_box") not in COLOUR_BOXES:
             raise VerifierError(f"colour_box {d.get('colour_box')!r} is not one of {COLOUR_BOXES}")
         try:
@@ -200,6 +192,17 @@ def verifier_from_dict(d: dict) -> "Verifier | TreeVerifier":
 def load_verifier_model(path: str | Path) -> "Verifier | TreeVerifier":
     """The verifier (either kind) in the JSON file ``path``."""
     return load_json_model(path, verifier_from_dict, VerifierError, "verifier")
+
+
+def check_json_model(d, format_name: str, version: int, features, error: type[ValueError], what: str) -> None:
+    """Refuse (as ``error``) a JSON model ``d`` that is not a dict of ``format_name``, its ``version``, over
+    exactly ``features``: the header every model file of the detector carries."""
+    if not isinstance(d, dict) or d.get("format") != format_name:
+        raise error(f"not a {format_name} model")
+    if d.get("version") != version:
+        raise error(f"{what} version {d.get('version')} unsupported (expected {version})")
+    if list(d.get("features", ())) != list(features):
+        raise error(f"{what} features {d.get('features')} are not {list(features)}")
 
 
 def load_json_model(path: str | Path, from_dict, error: type[ValueError], what: str):
