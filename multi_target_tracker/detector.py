@@ -180,11 +180,23 @@ def resolve_model(name: str) -> Path:
 _MODEL_CACHE: dict = {}
 
 
+def _cached(path: Path, load, *extra):
+    """``load(path)``, once per version of the file (its path, size and modification time) and ``extra``: the
+    configuration's validation and the detector built after it read each JSON model once."""
+    stat = path.stat()
+    key = (load, str(path), stat.st_size, stat.st_mtime_ns, *extra)
+    if key not in _MODEL_CACHE:
+        value = load(path, *extra)
+        while len(_MODEL_CACHE) >= 8:
+            _MODEL_CACHE.pop(next(iter(_MODEL_CACHE)))
+        _MODEL_CACHE[key] = value
+    return _MODEL_CACHE[key]
+
+
 def load_model(cfg: DetectorConfig):
     """The model of ``cfg`` loaded with its backend (a :class:`Cascade` or an ``OpenCVCascade``).
 
-    JSON cascades are cached by path, size and modification time (validation and the detector
-    built after it load the file once); any failure is a :class:`DetectorError` with the reason.
+    JSON cascades are cached (:func:`_cached`); any failure is a :class:`DetectorError` with the reason.
     """
     path = resolve_model(cfg.model)
     if cfg.backend == "opencv":
@@ -196,31 +208,24 @@ def load_model(cfg: DetectorConfig):
             return OpenCVCascade(path)
         except (OpenCVCascadeError, ValueError, cv2.error) as exc:
             raise DetectorError(str(exc)) from None
-    stat = path.stat()
-    key = (str(path), stat.st_size, stat.st_mtime_ns, cfg.max_model_stumps, cfg.min_model_window)
-    if key not in _MODEL_CACHE:
-        try:
-            cascade = Cascade.load(path, cfg.max_model_stumps, cfg.min_model_window)
-        except CascadeError as exc:
-            raise DetectorError(str(exc)) from None
-        while len(_MODEL_CACHE) >= 4:
-            _MODEL_CACHE.pop(next(iter(_MODEL_CACHE)))
-        _MODEL_CACHE[key] = cascade
-    return _MODEL_CACHE[key]
+    try:
+        return _cached(path, Cascade.load, cfg.max_model_stumps, cfg.min_model_window)
+    except CascadeError as exc:
+        raise DetectorError(str(exc)) from None
 
 
 def load_verifier(cfg: DetectorConfig) -> Verifier | TreeVerifier | None:
     """The colour verifier of ``cfg`` (None when ``cfg.verifier`` is empty)."""
     if not cfg.verifier:
         return None
-    return load_verifier_model(resolve_model(cfg.verifier))
+    return _cached(resolve_model(cfg.verifier), load_verifier_model)
 
 
 def load_box_regressor(cfg: DetectorConfig) -> BoxRegressor | None:
     """The box regressor of ``cfg`` (None when ``cfg.box_regressor`` is empty)."""
     if not cfg.box_regressor:
         return None
-    return BoxRegressor.load(resolve_model(cfg.box_regressor))
+    return _cached(resolve_model(cfg.box_regressor), BoxRegressor.load)
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:

@@ -175,3 +175,18 @@ def test_a_detector_with_a_colour_verifier_gets_colour_from_any_encoding(model, 
     for table in tables[1:]:
         assert np.allclose(key(table), key(tables[0]))
         assert np.allclose(table["score"], 1 / (1 + np.exp(-5.0)))
+
+
+def test_a_failing_warm_up_frame_is_reported_not_swallowed(model, monkeypatch):
+    """The warm-up frame's failure is kept (the node logs it) and the processor is still built."""
+    from multi_target_tracker.detector import Detector  # noqa: PLC0415
+
+    def broken(self, image, *args, **kwargs):
+        raise RuntimeError("kernel cache unreadable")
+
+    monkeypatch.setattr(Detector, "detect", broken)
+    proc = DetectorProcessor(DetectorConfig(model=model, **TINY_DETECTOR))
+    assert proc.warm_up_error == "RuntimeError: kernel cache unreadable"
+    monkeypatch.undo()
+    proc.warm_up()
+    assert proc.warm_up_error == ""
