@@ -42,6 +42,35 @@ def test_waits_then_starts_from_a_detection_of_the_aircraft_class():
     assert np.linalg.norm(r.params[:2] - ag.to_params(scene[-1][1])[:2]) < 10
 
 
+def test_a_start_on_the_detector_waits_for_start_after_rows_at_the_same_place():
+    """start_after: the track starts on the row that makes start_after in a row at the same place; a frame
+    without rows does not break the run, a row elsewhere starts it again, and re-acquisition of a lost track
+    waits the same way."""
+    scene = list(moving_target_scene(40))[:12]              # 3.5 px a frame
+
+    def started_at(rows_of, **cfg):
+        tracker = DockingTracker(DockingConfig(**{"detection_class": 2, "seed": 0, "override_after": 0, **cfg}))
+        for i, (frame, truth) in enumerate(scene):
+            if tracker.step(frame, rows_of(i, truth)).started:
+                return i, tracker
+        return None, tracker
+
+    at_truth = lambda i, truth: detections((*ag.to_box(truth), 0.9, 2))
+    assert started_at(at_truth)[0] == 0                                   # the default: the first row
+    assert started_at(at_truth, start_after=3)[0] == 2
+    gappy = lambda i, truth: at_truth(i, truth) if i % 2 == 0 else None
+    assert started_at(gappy, start_after=3)[0] == 4                       # rows on frames 0, 2, 4
+    elsewhere = lambda i, truth: detections((250, 180, 48, 32, 0.9, 2)) if i == 2 else at_truth(i, truth)
+    assert started_at(elsewhere, start_after=3)[0] == 5                   # 3, 4, 5 after the jump
+
+    i, tracker = started_at(at_truth, start_after=2)
+    tracker.state = LOST
+    tracker.filter.step = lambda f: FrameResult(scene[0][1], 0.3, 20, False, scene[0][1][None])
+    frame, truth = scene[-1]
+    assert not tracker.step(frame, at_truth(0, truth)).started            # one row: still lost
+    assert tracker.step(frame, at_truth(0, truth)).started                # the second: re-acquired
+
+
 def _start_refits(detected: bool, **overrides) -> int:
     """How many start re-fits were tried over 10 frames of the moving target, started on its axis-aligned box
     requested (initial_box) or detected (the first frame's detection)."""

@@ -6,7 +6,10 @@ all day must settle what happens before the aircraft appears and when the track 
 * **waiting** (state 2): no track yet. A start comes from an explicit box or quadrilateral
   (``start``/``request_start``: the node's ``initial_box`` parameter or ``docking/init`` topic),
   or from the best ``detections`` row of class ``detection_class`` scoring at least
-  ``min_detection_score``.
+  ``min_detection_score``, once that row has been at the same place (IoU >= 0.3 with the last one)
+  on ``start_after`` frames with rows in a row: a cascade's first box of an aircraft coming into view
+  is often a loose one (a few windows; the jet bridge or a vehicle beside it), and a track started
+  there grows with what it holds.
 * **tracking** (state 0): the filter runs every frame. When its score ``Ŝ_t`` stays below
   ``lost_score`` for ``lost_after`` consecutive frames, the track is declared lost. The default
   0.75 is the filter's update floor: tracked targets score above 0.8 in 99 % of the frames of
@@ -60,6 +63,9 @@ class DockingConfig(FilterConfig):
                                  low=-1, high=2**31 - 1)
     min_detection_score: float = param(0.0, "smallest detection score that may start the track",
                                        low=-1e9, high=1e9)
+    start_after: int = param(1, "a start or re-acquisition on the detector needs the aircraft row at the same place "
+                             "(IoU >= 0.3 with the last one) on this many frames with rows in a row (frames without "
+                             "rows do not break the run; 1: the first row, as before)", low=1, high=1000)
     override_after: int = param(5, "while tracking, restart on the aircraft detection after this many frames "
                                 "in which the detector saw the aircraft only away from the track, each time at "
                                 "the same place (0: detections are ignored while tracking)", low=0, high=10000)
@@ -149,6 +155,7 @@ class DockingTracker:
         self._pending: np.ndarray | None = None
         self._low = self._good = 0
         self._away, self._away_box = 0, None
+        self._seen, self._seen_box = 0, None
         if len(self.config.initial_box) == 4:
             self.request_start(self.config.initial_box)
 
@@ -178,6 +185,7 @@ class DockingTracker:
         self.filter.start(frame, state, old.background if keep else None, refit=refit)
         self.state, self._low, self._good, self._pending = TRACKING, 0, 0, None
         self._away, self._away_box = 0, None
+        self._seen, self._seen_box = 0, None
         return DockingResult(TRACKING, state.copy(), 1.0, 0, True, state[None].copy())
 
     def step(self, frame: np.ndarray, detections: np.ndarray | None = None) -> DockingResult:
@@ -188,7 +196,9 @@ class DockingTracker:
             box = best_detection(detections, self.config.detection_class, self.config.min_detection_score)
             if box is not None and not (self.state == LOST and self.config.keep_agreeing
                                         and _agree(box[None], ag.to_box(self.filter.estimate))[0]):
-                return self.start(frame, box, detected=True)
+                self._seen, self._seen_box = _run_at(self._seen, self._seen_box, box), box
+                if self._seen >= self.config.start_after:
+                    return self.start(frame, box, detected=True)
         if self.state == WAITING:
             return DockingResult(WAITING)
         if self.state == TRACKING and self.config.override_after > 0:
@@ -225,10 +235,14 @@ class DockingTracker:
         if on_track.any():
             self._away, self._away_box = 0, None
             return None
-        same_place = self._away_box is not None and box_iou(best, self._away_box) >= 0.3
-        self._away = self._away + 1 if same_place else 1
-        self._away_box = best
+        self._away, self._away_box = _run_at(self._away, self._away_box, best), best
         return best if self._away >= cfg.override_after else None
+
+
+def _run_at(count: int, last: np.ndarray | None, box: np.ndarray) -> int:
+    """Frames in a row the detector has seen the aircraft at ``box``'s place: ``count`` + 1 when ``box`` overlaps
+    the last counted row ``last`` by IoU >= 0.3, else 1 (it is somewhere new)."""
+    return count + 1 if last is not None and box_iou(box, last) >= 0.3 else 1
 
 
 def _holds(boxes: np.ndarray, points: np.ndarray) -> np.ndarray:
