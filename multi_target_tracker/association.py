@@ -137,6 +137,9 @@ class AssociationConfig:
     second_pass_iou: float = param(0.0, "a second-pass pair also needs at least this IoU of the target's predicted "
                                    "box and the detection (ByteTrack's IoU gate for its low-score boxes); 0: the "
                                    "first pass's gate only", low=0.0, high=1.0)
+    second_pass_min_hits: int = param(0, "only targets with at least this many assigned detections (rule 4's "
+                                      "track length) take part in the second pass; 0: every confirmed or coasting "
+                                      "target", low=0, high=100000)
     reacquire_frames: int = param(0, "frames a deleted target is kept as lost for re-confirmation (0: seed, off)",
                                   low=0, high=100000)
     reacquire_radius: float = param(1.0, "re-confirmation radius around a lost target's prediction [box diagonals]",
@@ -430,7 +433,7 @@ class MultiTargetTracker:
         # Second association (ByteTrack): targets left over against the low-score detections.
         if len(second):
             left = _without(active, matched_t[0], len(self.bank))
-            left = left[self.states[left] != TENTATIVE]
+            left = left[(self.states[left] != TENTATIVE) & (self.hits[left] >= cfg.second_pass_min_hits)]
             t2, d2 = self._associate(left, second, previous, centres, boxes, cfg.second_pass_iou)
             matched_t.append(left[t2])
             matched_d.append(second[d2])

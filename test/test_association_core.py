@@ -385,6 +385,13 @@ def test_low_confidence_detections_keep_a_track_and_its_id_only_with_the_second_
     assert 1 not in without[-1].tracks.visible().ids.tolist() and len(without[-1].tracks.visible()) == 1
 
 
+def test_second_pass_min_hits_leaves_young_targets_out_of_the_second_pass():
+    # frames 0-9 give the track 10 hits before its detections come flagged
+    kept, young = _two_stage(True, second_pass_min_hits=10), _two_stage(True, second_pass_min_hits=11)
+    assert all(state_of(r, 1) == CONFIRMED for r in kept[10:20])
+    assert state_of(young[12], 1) == PREDICTED and 1 not in young[-1].tracks.visible().ids.tolist()
+
+
 def test_a_low_confidence_detection_never_starts_a_track():
     tracker = MultiTargetTracker(AssociationConfig(low_confidence=True, confirm_length=1), KALMAN)
     for k in range(8):                            # confirm_length 1 and first-frame activation: none would wait
