@@ -15,6 +15,13 @@ _DTYPE_TO_POINTFIELD = {np.dtype(v).newbyteorder("<").str: k for k, v in _POINTF
 #: A detection: top-left corner x, y and size w, h in pixels, a score, a class id.
 DETECTION_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("w", "<f4"), ("h", "<f4"),
                             ("score", "<f4"), ("class_id", "<i4")])
+#: A detection with the optional ``low_confidence`` flag (uint8, 1: a group the detector's verifier scored between
+#: its low threshold and ``verifier_threshold``, published only for the association's second pass, never to start a
+#: track; 0: a detection as any other). Only a detector with ``low_confidence_band`` > 0 adds the field; a reader
+#: asking for :data:`DETECTION_DTYPE` ignores it, so a reader that does not know it must drop flagged rows with
+#: :func:`confident_rows` first.
+LOW_CONFIDENCE = "low_confidence"
+FLAGGED_DETECTION_DTYPE = np.dtype(DETECTION_DTYPE.descr + [(LOW_CONFIDENCE, "u1")])
 #: A track: stable id, box (px), velocity (px/s), score, class, age and missed frames, state.
 TRACK_DTYPE = np.dtype([("id", "<i4"), ("x", "<f4"), ("y", "<f4"), ("w", "<f4"), ("h", "<f4"),
                         ("vx", "<f4"), ("vy", "<f4"), ("score", "<f4"), ("class_id", "<i4"),
@@ -34,6 +41,19 @@ def table_boxes(table: np.ndarray) -> np.ndarray:
     """``(N, 4)`` float64 array ``x, y, w, h`` (top-left corner, pixels) of any table with those fields
     (detections, tracks, MOTChallenge rows)."""
     return np.stack([table["x"], table["y"], table["w"], table["h"]], axis=1).astype(np.float64)
+
+
+def low_confidence(table: np.ndarray) -> np.ndarray:
+    """Boolean mask of the rows flagged ``low_confidence`` (all False for a table without the field)."""
+    if table.dtype.names is None or LOW_CONFIDENCE not in table.dtype.names:
+        return np.zeros(len(table), dtype=bool)
+    return np.asarray(table[LOW_CONFIDENCE]) != 0
+
+
+def confident_rows(table: np.ndarray) -> np.ndarray:
+    """The rows not flagged ``low_confidence`` (the detections proper; the table itself without the field)."""
+    low = low_confidence(table)
+    return table[~low] if low.any() else table
 
 
 def table_to_cloud(table: np.ndarray, header=None):

@@ -59,6 +59,7 @@ from aircraft_docking_tracker.evaluation.detection_metrics import (  # noqa: E40
     DetectionAccumulator, detection_summary, match_frame)
 from aircraft_docking_tracker.evaluation.speed import fps, latency_percentiles  # noqa: E402
 from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
+from aircraft_docking_tracker.object_table import confident_rows  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
@@ -128,7 +129,7 @@ def run(det: Detector, items) -> dict:
     acc, acc_mot, latencies = DetectionAccumulator(), DetectionAccumulator(), []
     for image, boxes, ignore, ignore_mot in items:
         started = time.perf_counter()
-        table = det.detect(image)
+        table = confident_rows(det.detect(image))
         latencies.append(time.perf_counter() - started)
         found = np.column_stack([table["x"], table["y"], table["w"], table["h"]])
         acc.add_frame(found, table["score"], boxes, ignore)
@@ -250,7 +251,7 @@ def miss_breakdown(detectors: dict, seeds: list[tuple[int, int]]) -> dict:
                 cfg = det.config
                 boxes, logit = det.candidates(image, *raw, cfg.window_margin)
                 boxes = scale_boxes(boxes, cfg.box_scale) if len(boxes) else boxes
-                final, scores = det._verified(image, *raw, cfg.window_margin)
+                final, scores = det.verified(image, *raw, cfg.window_margin)
                 final = scale_boxes(final, cfg.box_scale) if len(final) else final
                 small = scale_boxes(group_stats(*raw, cfg.group_iou, cfg.window_margin)[0], cfg.box_scale)
                 matched, _ = match_frame(final, scores, truth, 0.5, ignore)

@@ -36,7 +36,10 @@ Beyond the seed, each selectable (``bench/association.py`` measures each one):
 * ``iou_weight``: adds ``w (1 − IoU)`` between the predicted box and the detection to the cost.
 * ``second_pass``: ByteTrack's idea (Zhang et al., ECCV 2022): detections with score below
   ``high_score`` are kept out of the first association and offered in a second one to the
-  targets left without a detection; they never start tracks.
+  targets left without a detection; they never start tracks. ``low_confidence``: so do the detections a
+  detector flags ``low_confidence`` (groups its verifier scored below its threshold, ``low_confidence_band``),
+  whatever their score; off, flagged detections are dropped. ``second_pass_iou``: the second pass also
+  needs this IoU of predicted box and detection (ByteTrack gates its low-score boxes by IoU).
 * ``reacquire_frames``: a target deleted by rule 1 is kept as *lost* this many frames more; a new
   detection near its prediction (within ``reacquire_radius`` box diagonals) re-confirms it with
   its old ID instead of starting a tentative track.
@@ -127,6 +130,16 @@ class AssociationConfig:
     second_pass: bool = param(True, "ByteTrack: associate detections scoring below high_score in a second pass")
     high_score: float = param(0.6, "score (a fraction) splitting first-pass from second-pass detections",
                               low=0.0, high=1.0)
+    low_confidence: bool = param(False, "detections the detector flags low_confidence (verifier log odds under its "
+                                 "threshold; the detector's low_confidence_band) join the second pass: they only "
+                                 "extend confirmed or coasting targets left without a detection, never start a "
+                                 "track; false: they are dropped (ByteTrack's two thresholds)")
+    second_pass_iou: float = param(0.0, "a second-pass pair also needs at least this IoU of the target's predicted "
+                                   "box and the detection (ByteTrack's IoU gate for its low-score boxes); 0: the "
+                                   "first pass's gate only", low=0.0, high=1.0)
+    second_pass_min_hits: int = param(0, "only targets with at least this many assigned detections (rule 4's "
+                                      "track length) take part in the second pass; 0: every confirmed or coasting "
+                                      "target", low=0, high=100000)
     reacquire_frames: int = param(0, "frames a deleted target is kept as lost for re-confirmation (0: seed, off)",
                                   low=0, high=100000)
     reacquire_radius: float = param(1.0, "re-confirmation radius around a lost target's prediction [box diagonals]",
@@ -319,7 +332,7 @@ def _without(indices: np.ndarray, remove: np.ndarray, size: int) -> np.ndarray:
     return indices[keep[indices]]
 
 
-def _as_inputs(boxes, scores, class_ids):
+def _as_inputs(boxes, scores, class_ids, low=None):
     boxes = np.asarray(boxes, dtype=np.float64)
     if boxes.size == 0:
         boxes = boxes.reshape(0, 4)
@@ -328,9 +341,11 @@ def _as_inputs(boxes, scores, class_ids):
     n = len(boxes)
     scores = np.ones(n) if scores is None else np.asarray(scores, dtype=np.float64).reshape(-1)
     class_ids = np.zeros(n, dtype=np.int64) if class_ids is None else np.asarray(class_ids).reshape(-1)
-    if len(scores) != n or len(class_ids) != n:
-        raise AssociationError(f"{n} boxes but {len(scores)} scores and {len(class_ids)} class ids")
-    return boxes, scores, class_ids
+    low = np.zeros(n, dtype=bool) if low is None else np.asarray(low).reshape(-1).astype(bool)
+    if len(scores) != n or len(class_ids) != n or len(low) != n:
+        raise AssociationError(f"{n} boxes but {len(scores)} scores, {len(class_ids)} class ids and {len(low)} "
+                               "low-confidence flags")
+    return boxes, scores, class_ids, low
 
 
 # --------------------------------------------------------------------------------------------
@@ -372,16 +387,19 @@ class MultiTargetTracker:
         self.last_stamp = None
 
     # -- one frame ----------------------------------------------------------------------------
-    def step(self, stamp: float, boxes, scores=None, class_ids=None) -> FrameResult:
-        """Process the detections (x, y, w, h boxes, scores, class ids) of the frame at ``stamp`` [s]."""
+    def step(self, stamp: float, boxes, scores=None, class_ids=None, low=None) -> FrameResult:
+        """Process the detections (x, y, w, h boxes, scores, class ids) of the frame at ``stamp`` [s]; ``low``
+        flags the low-confidence ones (second pass only with ``low_confidence``, else dropped)."""
         cfg = self.config
-        boxes, scores, class_ids = _as_inputs(boxes, scores, class_ids)
+        boxes, scores, class_ids, low = _as_inputs(boxes, scores, class_ids, low)
         if cfg.score_scale != 1.0:
             scores = scores / cfg.score_scale
         ok = valid_detections(boxes, scores)
         rejected = int((~ok).sum())
         ok &= scores >= cfg.min_score
-        boxes, scores, class_ids = boxes[ok], scores[ok], class_ids[ok]
+        if not cfg.low_confidence:
+            ok &= ~low
+        boxes, scores, class_ids, low = boxes[ok], scores[ok], class_ids[ok], low[ok]
 
         starting = self.last_stamp is None
         T, was_reset = self._frame_interval(stamp)
@@ -394,11 +412,8 @@ class MultiTargetTracker:
 
         centres = boxes[:, :2] + boxes[:, 2:] / 2.0
         active = np.flatnonzero(self.states != LOST)
-        if cfg.second_pass:
-            first = np.flatnonzero(scores >= cfg.high_score)
-            second = np.flatnonzero(scores < cfg.high_score)
-        else:
-            first, second = np.arange(len(boxes)), np.zeros(0, dtype=np.intp)
+        high = ~low & (scores >= cfg.high_score) if cfg.second_pass else ~low
+        first, second = np.flatnonzero(high), np.flatnonzero(~high)
 
         # First association: every active target against the (high-score) detections; with the
         # cascade, targets coasting unpublished (wide, growing gates) only get what the others left.
@@ -418,8 +433,8 @@ class MultiTargetTracker:
         # Second association (ByteTrack): targets left over against the low-score detections.
         if len(second):
             left = _without(active, matched_t[0], len(self.bank))
-            left = left[self.states[left] != TENTATIVE]
-            t2, d2 = self._associate(left, second, previous, centres, boxes)
+            left = left[(self.states[left] != TENTATIVE) & (self.hits[left] >= cfg.second_pass_min_hits)]
+            t2, d2 = self._associate(left, second, previous, centres, boxes, cfg.second_pass_iou)
             matched_t.append(left[t2])
             matched_d.append(second[d2])
         # Unmatched first-pass detections may re-confirm lost targets, else start tentative tracks.
@@ -467,8 +482,9 @@ class MultiTargetTracker:
         return T, was_reset
 
     def _associate(self, targets: np.ndarray, detections: np.ndarray, previous: np.ndarray,
-                   centres: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Cost (eqs. 8-10, options), padding and Hungarian (eqs. 11-13), gate (rule 2).
+                   centres: np.ndarray, boxes: np.ndarray, min_iou: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Cost (eqs. 8-10, options), padding and Hungarian (eqs. 11-13), gate (rule 2); with ``min_iou`` > 0 a
+        pair whose predicted box and detection overlap less is excluded as well (the second pass's IoU gate).
 
         Returns indices into ``targets`` and ``detections`` of the accepted pairs.
         """
@@ -481,6 +497,9 @@ class MultiTargetTracker:
             i, j = gated_pairs(predicted, self.bank.innovation_variance(targets), points, cfg.mahalanobis_gate)
         else:
             i, j = all_pairs(len(targets), len(detections))
+        if min_iou > 0:
+            inside = box_iou(self.bank.boxes(targets[i]), boxes[detections[j]]) >= min_iou
+            i, j = i[inside], j[inside]
         ti = targets[i]
         # θ from the last estimate (every target existed before this frame's births), r from the prediction
         pair_cost = seed_cost(previous[ti], predicted[i], self.bank.velocities[ti], points[j],

@@ -32,7 +32,8 @@ from aircraft_docking_tracker.io.bag import stamp_to_ns
 from aircraft_docking_tracker.config import param
 from aircraft_docking_tracker.ros.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.ros.node_base import PerceptionNode, run_node
-from aircraft_docking_tracker.object_table import (DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_boxes,
+from aircraft_docking_tracker.object_table import (DETECTION_DTYPE, FLAGGED_DETECTION_DTYPE, LOW_CONFIDENCE,
+                                                   TRACK_DTYPE, cloud_to_table, low_confidence, table_boxes,
                                                    table_to_cloud)
 from aircraft_docking_tracker.ros.processing import (DetectionsLimit, ImageLimit, MessageProcessor, ProcessorSpec, Rejected,
                                                  best_rows)
@@ -119,10 +120,11 @@ class AssociationProcessor(MessageProcessor):
         if topic == "image":
             return self._image(msg)
         stamp = stamp_to_ns(msg.header.stamp)
-        rows = best_rows(cloud_to_table(msg, DETECTION_DTYPE), self.node.max_detections, self.report_rejection,
-                         "detections")
+        flagged = any(f.name == LOW_CONFIDENCE for f in msg.fields)
+        rows = best_rows(cloud_to_table(msg, FLAGGED_DETECTION_DTYPE if flagged else DETECTION_DTYPE),
+                         self.node.max_detections, self.report_rejection, "detections")
         boxes = table_boxes(rows)
-        result = self.tracker.step(stamp * 1e-9, boxes, rows["score"], rows["class_id"])
+        result = self.tracker.step(stamp * 1e-9, boxes, rows["score"], rows["class_id"], low_confidence(rows))
         if result.rejected:
             self.invalid_detections += result.rejected
             self.report_rejection(f"detections: {result.rejected} invalid rows (NaN, inf or size <= 0) dropped")

@@ -52,7 +52,7 @@ from scipy.special import expit
 
 from aircraft_docking_tracker.config import ConfigError, param
 from aircraft_docking_tracker.geometry import box_to_quad, scale_boxes
-from aircraft_docking_tracker.object_table import DETECTION_DTYPE
+from aircraft_docking_tracker.object_table import DETECTION_DTYPE, FLAGGED_DETECTION_DTYPE, LOW_CONFIDENCE
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
@@ -109,6 +109,11 @@ class DetectorConfig:
                           "probability; needs colour images and the cascade backend (the UAV set-up's)")
     verifier_threshold: float = param(0.0, "log odds a group needs from the verifier to be a detection (chosen on "
                                       "tuning scenes)", low=-50.0, high=50.0)
+    low_confidence_band: float = param(0.0, "groups whose verifier log odds lie less than this below "
+                                       "verifier_threshold are published too, flagged low_confidence (the table's "
+                                       "extra field), for the association's second pass (ByteTrack); scored by "
+                                       "their probability like the others; 0: none, the table without the field",
+                                       low=0.0, high=50.0)
     box_regressor: str = param("", "box regressor of the groups (JSON model; a bare name is looked up in "
                                "multi_target_tracker/models; empty: none): moves each edge of a group's mean box by "
                                "an offset predicted from its member windows, before containment and box_scale; "
@@ -138,6 +143,8 @@ class DetectorConfig:
             raise ConfigError("angles other than 0 need the cascade backend", ("angles", "backend"))
         if self.verifier and self.backend != "cascade":
             raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
+        if self.low_confidence_band > 0 and not self.verifier:
+            raise ConfigError("low_confidence_band needs a verifier (its log odds)", ("low_confidence_band", "verifier"))
         if self.box_regressor and self.backend != "cascade":
             raise ConfigError("a box regressor needs the cascade backend", ("box_regressor", "backend"))
         if self.min_size > 0 and self.max_size > 0 and self.min_size > self.max_size:
@@ -526,8 +533,9 @@ class Detector:
             boxes, scores = self.raw(gray, last_stage_margin)
         except FeatureError as exc:
             raise DetectorError(str(exc)) from exc
+        low = None
         if self.verifier is not None:
-            boxes, scores = self._verified(image[y0:y0 + gray.shape[0], x0:x0 + gray.shape[1]], boxes, scores,
+            boxes, scores, low = self._verified(image[y0:y0 + gray.shape[0], x0:x0 + gray.shape[1]], boxes, scores,
                                            cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.box_regressor is not None:
             boxes, scores = self._regressed(boxes, scores, gray.shape[::-1],
@@ -538,7 +546,9 @@ class Detector:
         else:  # OpenCV grouped already (minNeighbors); the two orientations only need merging
             keep = suppress_contained(boxes, scores, cfg.containment, cfg.max_detections)
             boxes, scores = boxes[keep], scores[keep]
-        out = np.zeros(len(boxes), DETECTION_DTYPE)
+        out = np.zeros(len(boxes), DETECTION_DTYPE if low is None else FLAGGED_DETECTION_DTYPE)
+        if low is not None:
+            out[LOW_CONFIDENCE] = low
         scaled = scale_boxes(boxes, cfg.box_scale)
         out["x"], out["y"] = scaled[:, 0] + x0, scaled[:, 1] + y0
         out["w"], out["h"] = scaled[:, 2], scaled[:, 3]
@@ -577,10 +587,22 @@ class Detector:
         return group_boxes[keep], scores[keep]
 
     def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
-        """The :meth:`candidates` that the colour verifier accepts, scored by its probability, contained ones dropped."""
+        """The :meth:`candidates` that the colour verifier accepts, scored by its probability, contained ones dropped:
+        ``(boxes, scores, low)``, ``low`` None without ``low_confidence_band``, else the mask of the groups published
+        low-confidence (log odds within the band below ``verifier_threshold``). Containment keeps the better score
+        first, so a low-confidence group never drops a detection: the others are the same with or without the band
+        (``max_detections`` aside)."""
         cfg = self.config
         group_boxes, logit = self.candidates(bgr, boxes, margins, margin_floor)
-        accepted = logit >= cfg.verifier_threshold
-        group_boxes, scores = group_boxes[accepted], expit(logit[accepted])
+        band = cfg.low_confidence_band
+        accepted = logit >= cfg.verifier_threshold - band
+        group_boxes, logit = group_boxes[accepted], logit[accepted]
+        scores = expit(logit)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
-        return group_boxes[keep], scores[keep]
+        return group_boxes[keep], scores[keep], (logit[keep] < cfg.verifier_threshold) if band > 0 else None
+
+    def verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """:meth:`_verified`'s detections proper ``(boxes, scores)``, without the low-confidence ones (what the
+        verifier accepts at ``verifier_threshold``; tuning tools and the detector bench count these)."""
+        group_boxes, scores, low = self._verified(bgr, boxes, margins, margin_floor)
+        return (group_boxes, scores) if low is None else (group_boxes[~low], scores[~low])

@@ -26,7 +26,7 @@ import numpy as np
 from aircraft_docking_tracker.config import param
 from aircraft_docking_tracker.ros.markers import boxes_to_image_marker, boxes_to_markers
 from aircraft_docking_tracker.ros.node_base import PerceptionNode, run_node
-from aircraft_docking_tracker.object_table import table_to_cloud
+from aircraft_docking_tracker.object_table import confident_rows, table_to_cloud
 from aircraft_docking_tracker.ros.processing import ERROR, ImageLimit, MessageProcessor, ProcessorSpec, Rejected
 from multi_target_tracker.detector import Detector, DetectorConfig
 
@@ -116,12 +116,13 @@ class DetectorProcessor(MessageProcessor):
         else:
             bgr, image = None, to_mono8(msg, limit)
         table = self.detector.detect(image)
-        self.last_count = len(table)
+        shown = confident_rows(table)     # low-confidence rows (low_confidence_band) are for the association only
+        self.last_count = len(shown)
         out = [("detections", table_to_cloud(table, msg.header)),
-               ("detections/markers", boxes_to_markers(table, msg.header, "detections")),
-               ("detections/image_markers", boxes_to_image_marker(table, msg.header, "detections"))]
+               ("detections/markers", boxes_to_markers(shown, msg.header, "detections")),
+               ("detections/image_markers", boxes_to_image_marker(shown, msg.header, "detections"))]
         if self.node.annotate_image:      # bgr is there for the colour verifier too: publish only when asked
-            out.append(("detections/image", numpy_to_image(draw_detections(bgr, table), "bgr8", msg.header)))
+            out.append(("detections/image", numpy_to_image(draw_detections(bgr, shown), "bgr8", msg.header)))
         return out
 
     def reset(self) -> None:

@@ -361,3 +361,60 @@ def test_published_boxes_cut_to_the_frame_as_a_target_leaves_it():
     assert cut[4].tracks.boxes[0][2] == pytest.approx(10.0, abs=3.0)      # centre near 100: half of it left
     assert cut[4].tracks.states[0] == CONFIRMED
     assert cut[-1].tracks.states[0] == PREDICTED and whole[-1].tracks.states[0] == COASTING
+
+
+# -- two thresholds (ByteTrack): low-confidence detections --------------------------------------
+def _moving(k):
+    return [box(50 + 4 * k, 60)]
+
+
+def _two_stage(low_confidence, frames=30, hidden=range(10, 20), **extra):
+    """One vehicle moving 4 px a frame; in ``hidden`` frames its detection comes only flagged low-confidence."""
+    cfg = AssociationConfig(confirm_length=3, gate="mahalanobis", max_misses=3, coast_output_frames=2,
+                            low_confidence=low_confidence, **extra)
+    tracker = MultiTargetTracker(cfg, KALMAN)
+    return [tracker.step(k / FPS, np.array(_moving(k)), scores=[0.9], low=[k in hidden]) for k in range(frames)]
+
+
+def test_low_confidence_detections_keep_a_track_and_its_id_only_with_the_second_stage():
+    with_stage, without = _two_stage(True), _two_stage(False)
+    assert [sorted(r.tracks.visible().ids.tolist()) for r in with_stage[3:]] == [[1]] * 27
+    assert all(state_of(r, 1) == CONFIRMED for r in with_stage[10:20])
+    # without: the track coasts, is dropped after max_misses and the vehicle comes back under a new id
+    assert state_of(without[12], 1) == PREDICTED and state_of(without[19], 1) in (LOST, None)
+    assert 1 not in without[-1].tracks.visible().ids.tolist() and len(without[-1].tracks.visible()) == 1
+
+
+def test_second_pass_min_hits_leaves_young_targets_out_of_the_second_pass():
+    # frames 0-9 give the track 10 hits before its detections come flagged
+    kept, young = _two_stage(True, second_pass_min_hits=10), _two_stage(True, second_pass_min_hits=11)
+    assert all(state_of(r, 1) == CONFIRMED for r in kept[10:20])
+    assert state_of(young[12], 1) == PREDICTED and 1 not in young[-1].tracks.visible().ids.tolist()
+
+
+def test_a_low_confidence_detection_never_starts_a_track():
+    tracker = MultiTargetTracker(AssociationConfig(low_confidence=True, confirm_length=1), KALMAN)
+    for k in range(8):                            # confirm_length 1 and first-frame activation: none would wait
+        result = tracker.step(k / FPS, np.array([box(300, 300), box(50 + 4 * k, 60)]), scores=[0.95, 0.99],
+                              low=[True, True])
+        assert len(result.tracks) == 0
+    result = _two_stage(True, hidden=range(0, 30))[-1]      # the vehicle only ever flagged: no track either
+    assert len(result.tracks) == 0
+
+
+def test_second_pass_iou_gate_refuses_a_low_confidence_detection_off_the_track():
+    def last(offset, min_iou):
+        cfg = AssociationConfig(confirm_length=2, gate="mahalanobis", low_confidence=True, second_pass_iou=min_iou)
+        tracker = MultiTargetTracker(cfg, KALMAN)
+        for k in range(6):
+            shifted = box(50 + 4 * k + (offset if k == 5 else 0), 60)
+            result = tracker.step(k / FPS, np.array([shifted]), low=[k == 5])
+        return result
+    assert state_of(last(6.0, 0.0), 1) == CONFIRMED             # the Mahalanobis gate alone takes it
+    assert last(6.0, 0.5).tracks.misses.tolist() == [1]        # 6 px off a 10-px box: IoU 0.25 < 0.5, a miss
+    assert state_of(last(1.0, 0.5), 1) == CONFIRMED             # IoU 0.82
+
+
+def test_low_confidence_flags_must_match_the_boxes():
+    with pytest.raises(AssociationError):
+        MultiTargetTracker().step(0.0, np.array([box(5, 5)]), low=[True, False])

@@ -14,7 +14,8 @@ from visualization_msgs.msg import MarkerArray
 from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
 from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
-from aircraft_docking_tracker.object_table import DETECTION_DTYPE, TRACK_DTYPE, cloud_to_table, table_to_cloud
+from aircraft_docking_tracker.object_table import (DETECTION_DTYPE, FLAGGED_DETECTION_DTYPE, LOW_CONFIDENCE, TRACK_DTYPE,
+                                                   cloud_to_table, confident_rows, table_to_cloud)
 from aircraft_docking_tracker.ros.processing import ProcessingStats, process_guarded
 from multi_target_tracker.association import AssociationConfig
 from multi_target_tracker.association_node import (AssociationNode, AssociationNodeConfig, AssociationOutputConfig,
@@ -157,3 +158,33 @@ def test_seed_yaml_is_seed_config():
     assert assoc == seed_config()
     assert kalman.missed_update == "prediction"          # §3.3 rule 1: a missed target is updated with its prediction
     assert kalman.acceleration_noise_per_px == 0.0 and kalman.measurement_noise_per_px == 0.0
+
+
+def _flagged_msg(k: int, low_first: bool) -> PointCloud2:
+    """:func:`detections_msg`'s two targets with the low_confidence field, the first target flagged when asked,
+    plus a flagged clutter row far from both."""
+    plain = cloud_to_table(detections_msg(k), DETECTION_DTYPE)
+    table = np.zeros(3, FLAGGED_DETECTION_DTYPE)
+    for name in DETECTION_DTYPE.names:
+        table[name][:2] = plain[name]
+    table[2] = (400.0, 300.0, 10.0, 8.0, 0.99, 0, 1)
+    table[LOW_CONFIDENCE][:2] = (int(low_first), 0)
+    return table_to_cloud(table, header(k))
+
+
+def test_low_confidence_field_round_trips_and_reaches_the_second_pass():
+    msg = _flagged_msg(0, True)
+    back = cloud_to_table(msg, FLAGGED_DETECTION_DTYPE)
+    assert back[LOW_CONFIDENCE].tolist() == [1, 0, 1] and len(confident_rows(back)) == 1
+    assert len(cloud_to_table(msg, DETECTION_DTYPE)) == 3       # a reader of the plain table ignores the field
+
+    def run(low_confidence: bool):
+        proc = AssociationProcessor(dataclasses.replace(FAST, low_confidence=low_confidence))
+        for k in range(12):                                      # the first target flagged in frames 4-11
+            out = dict(proc.process("detections", _flagged_msg(k, 4 <= k)))
+        return cloud_to_table(out["tracks"], TRACK_DTYPE)
+
+    with_stage, without = run(True), run(False)
+    assert sorted(with_stage["id"].tolist()) == [1, 2]           # the flagged clutter row started nothing
+    assert with_stage["state"][with_stage["id"] == 1].tolist() == [1]   # kept confirmed by its flagged detections
+    assert without["state"][without["id"] == 1].tolist() != [1] and 3 not in without["id"]

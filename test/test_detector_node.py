@@ -93,6 +93,35 @@ def test_colour_verifier_set_up_publishes_only_declared_topics():
     assert set(proc.outputs) == {t for t, _ in out}
 
 
+def test_uav_set_up_publishes_low_confidence_rows_flagged_and_leaves_them_out_of_the_markers():
+    """Detector processor -> cloud -> association processor, the UAV files: the flagged rows travel in the
+    low_confidence field, the markers draw only the detections proper, and the association reads the flag."""
+    from aircraft_docking_tracker.object_table import FLAGGED_DETECTION_DTYPE, LOW_CONFIDENCE  # noqa: PLC0415
+    from aircraft_docking_tracker.offline import build_processor  # noqa: PLC0415
+    from aircraft_docking_tracker.scenarios.uav import (UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION,  # noqa: PLC0415
+                                                        UavScene, UavSceneConfig)
+
+    setup = package_config_dir() / "uav_camera.yaml"
+    proc = build_processor("detector", setup)
+    assert proc.detector.config.low_confidence_band > 0
+    tracker = build_processor("association", setup)
+    assert tracker.tracker.config.low_confidence
+    config = UavSceneConfig(frames=24, fps=10.0, difficulty=1, ground_resolution=UAV_SETUP_GROUND_RESOLUTION)
+    flagged = shown = 0
+    for k, frame in enumerate(UavScene(config, seed=UAV_EVAL_SEEDS[901]).frames()):
+        if k % 4:
+            continue
+        out = dict(process_guarded(proc, "image", numpy_to_image(frame.image, "bgr8", header(k)), ProcessingStats()))
+        assert LOW_CONFIDENCE in [f.name for f in out["detections"].fields]
+        table = cloud_to_table(out["detections"], FLAGGED_DETECTION_DTYPE)
+        low = table[LOW_CONFIDENCE] == 1
+        assert len(out["detections/markers"].markers) - 1 == int((~low).sum()) == proc.last_count   # - delete-all
+        flagged += int(low.sum())
+        shown += int((~low).sum())
+        assert "tracks" in dict(tracker.process("detections", out["detections"]))
+    assert flagged > 0 and shown > 0
+
+
 def test_compressed_input(model, scenes):
     proc = DetectorProcessor(DetectorConfig(model=model, **TINY_DETECTOR), DetectorNodeConfig(compressed=True))
     assert proc.inputs == {"image": "sensor_msgs/msg/CompressedImage"}

@@ -11,8 +11,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir, validate
+from aircraft_docking_tracker.config import ConfigError, load_yaml_parameters, package_config_dir, validate
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator
+from aircraft_docking_tracker.object_table import LOW_CONFIDENCE, confident_rows
 from aircraft_docking_tracker.offline import build_processor
 from aircraft_docking_tracker.scenarios.uav import (
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig,
@@ -70,7 +71,7 @@ def _counts(detector, seed: int) -> tuple[int, int, int]:
     acc = DetectionAccumulator()
     for k, frame in enumerate(UavScene(config, seed=seed).frames()):
         if k % 8 == 4:
-            table = detector.detect(frame.image)          # BGR: the set-up's colour verifier reads it
+            table = confident_rows(detector.detect(frame.image))   # BGR: the set-up's colour verifier reads it
             boxes, ignore = detection_truth(frame.ground_truth)
             acc.add_frame(np.column_stack([table["x"], table["y"], table["w"], table["h"]]), table["score"],
                           boxes, ignore)
@@ -134,3 +135,30 @@ def test_the_tree_verifier_finds_more_vehicles_at_fewer_false_alarms_on_held_out
     assert vehicles == l_vehicles
     assert true >= l_true + 0.04 * vehicles, (true, l_true, vehicles)
     assert 1 - true / max(detections, 1) <= 1 - l_true / max(l_detections, 1) + 0.06
+
+
+def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_unchanged(detector):
+    """Groups the verifier scores within the band below its threshold are published flagged (their score, the
+    verifier's probability, below the threshold's); the detections proper are the same with or without the band."""
+    without = Detector(dataclasses.replace(detector.config, low_confidence_band=0.0))
+    banded = Detector(dataclasses.replace(detector.config, low_confidence_band=2.0))
+    threshold = detector.config.verifier_threshold
+    config = UavSceneConfig(frames=80, fps=10.0, difficulty=1, ground_resolution=UAV_SETUP_GROUND_RESOLUTION)
+    flagged = 0
+    for k, frame in enumerate(UavScene(config, seed=UAV_EVAL_SEEDS[900]).frames()):
+        if k % 16 != 4:
+            continue
+        plain, table = without.detect(frame.image), banded.detect(frame.image)
+        assert LOW_CONFIDENCE not in plain.dtype.names and LOW_CONFIDENCE in table.dtype.names
+        low = table[LOW_CONFIDENCE] == 1
+        high = table[~low][list(plain.dtype.names)]
+        assert high.tolist() == plain.tolist()
+        logit = np.log(table["score"] / (1 - table["score"]))
+        assert (logit[low] < threshold + 1e-4).all() and (logit[low] >= threshold - 2.0 - 1e-4).all()
+        flagged += int(low.sum())
+    assert flagged > 0
+
+
+def test_low_confidence_band_needs_a_verifier():
+    with pytest.raises(ConfigError):
+        validate(DetectorConfig(low_confidence_band=1.0))

@@ -150,7 +150,7 @@ def operating_point(det: Detector, seeds, min_neighbors: list[int]) -> dict:
         det.config = dataclasses.replace(cfg, min_neighbors=n)
         acc = DetectionAccumulator()
         for bgr, truth, ignore, (boxes, margins) in frames:
-            group_boxes, probability = det._verified(bgr, boxes, margins, cfg.window_margin)
+            group_boxes, probability = det.verified(bgr, boxes, margins, cfg.window_margin)
             acc.add_frame(scale_boxes(group_boxes, cfg.box_scale), probability, truth, ignore)
         s = acc.summary()
         recall, precision, score = (np.asarray(s[key]) for key in ("pr_recall", "pr_precision", "pr_score"))

@@ -46,7 +46,7 @@ from aircraft_docking_tracker.evaluation.sot_metrics import SotMetricsConfig, sc
 from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from aircraft_docking_tracker.evaluation.speed import latency_percentiles, stream_fps
 from aircraft_docking_tracker.images import to_bgr8
-from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table, table_boxes
+from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table, confident_rows, table_boxes
 from aircraft_docking_tracker.scenarios import strips
 from aircraft_docking_tracker.scenarios.datasets import mot_rows_to_tracks, read_results_regions, read_sot_boxes
 from aircraft_docking_tracker.scenarios.messages import (DETECTIONS, DOCKING_POLYGON, GROUND_TRUTH, GT_NOSE,
@@ -261,7 +261,8 @@ def timelines(evaluator: MotEvaluator) -> dict:
 
 
 def score_detection(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
-    """``gt``, ``out``: stamp -> tables with x, y, w, h (and score for ``out``)."""
+    """``gt``, ``out``: stamp -> tables with x, y, w, h (and score for ``out``); rows flagged ``low_confidence``
+    (offered to the association's second pass only) are not detections and not scored."""
     acc = DetectionAccumulator(DetectionMetricsConfig(cfg.iou_threshold))
     missing = 0
     for s in sorted(gt):
@@ -270,6 +271,7 @@ def score_detection(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
         if dets is None:
             missing += 1
             dets = np.zeros(0, [("x", "f4"), ("y", "f4"), ("w", "f4"), ("h", "f4"), ("score", "f4")])
+        dets = confident_rows(dets)
         acc.add_frame(table_boxes(dets), dets["score"], table_boxes(truth), hidden_rows(truth, cfg))
     result = acc.summary()
     result["missing_outputs"] = missing
