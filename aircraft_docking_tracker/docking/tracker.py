@@ -65,7 +65,7 @@ class DockingConfig(FilterConfig):
                                        low=-1e9, high=1e9)
     start_after: int = param(1, "a start or re-acquisition on the detector needs the aircraft row at the same place "
                              "(IoU >= 0.3 with the last one) on this many frames with rows in a row (frames without "
-                             "rows do not break the run; 1: the first row, as before)", low=1, high=1000)
+                             "rows do not break the run; 1: the first row. Measured from the stand cascade on tuning seeds 100-119 / 150-159: 2 and 3 lose more frames waiting than the looser first box costs, 60 f median 0.601 -> 0.533 / 0.581)", low=1, high=1000)
     override_after: int = param(5, "while tracking, restart on the aircraft detection after this many frames "
                                 "in which the detector saw the aircraft only away from the track, each time at "
                                 "the same place (0: detections are ignored while tracking)", low=0, high=10000)
