@@ -188,6 +188,11 @@ class FilterConfig(AppearanceConfig):
                                    "principal axis, by at most this much per frame [rad] (0: off, the rectangle "
                                    "keeps X̂'s rotation; measured: follows the turn, but from the first polygon the "
                                    "scale overshoots at the stop)", low=0.0, high=0.3)
+    extent_axes: str = param("estimate", "static camera: the axes along which the foreground's extent is measured: "
+                             "estimate (X̂'s own u and v: a rotation error of X̂ widens the rectangle, 7-10 %) or "
+                             "silhouette (the silhouette's principal axes, the one nearer X̂'s u giving the width; X̂'s "
+                             "rotation is kept, left to the shape prior; static_background.foreground_extent)",
+                             choices=("estimate", "silhouette"))
     flicker_gain: float = param(0.0, "static camera: a per-pixel threshold learnt outside the target, this times "
                                 "the pixel's own difference from the background (flickering edges, glare; 0: off; measured: "
                                 "median AUC up, but the scale overshoots at the stop under a light ramp)",
@@ -211,6 +216,11 @@ class FilterConfig(AppearanceConfig):
                               "or skip (the running background absorbs a standing aircraft: its silhouette shrinks, "
                               "and what is left merged with a flickering horizon widens it)",
                               choices=("measure", "skip"))
+    extent_still_after: int = param(0, "static camera, extent_still skip: the extent is still measured on the first "
+                                    "this many frames in a row of a still target (a slowly growing aircraft near the "
+                                    "stop moves no corner by a level pixel a frame, yet its silhouette is fresh; the "
+                                    "running background absorbs a standing one only over tens of frames; 0: skip from "
+                                    "the first)", low=0, high=100)
     extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
                                    "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
     start_refit: int = param(5, "static camera, a start from an axis-aligned box (a loose detector box): after this "
@@ -331,6 +341,7 @@ class AffineParticleFilter:
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
         self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
                              "invalid": 0}
+        self._still_run = 0                 # frames in a row the target was still (extent_still_after)
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "still": 0, "none": 0, "implausible": 0, "refused": 0}
 
     # ------------------------------------------------------------------ shared building blocks
@@ -462,7 +473,7 @@ class AffineParticleFilter:
         state = np.asarray(state, dtype=float)
         self._load(frame, state)
         self._initialise(state)
-        self._frames = 0
+        self._frames, self._still_run = 0, 0
         axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
         self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
         self._start_track = [(frame, state.copy())] if self._start_box is not None else []
@@ -506,9 +517,11 @@ class AffineParticleFilter:
         """The foreground's rectangle around X̂ (static_background.foreground_extent) on the grid of 1.6 X̂, or,
         when the silhouette runs off it, on the grid of ``extent_wide`` X̂ (a lagging or too narrow X̂ whose own
         target runs off the small grid: measured, that is a runaway, scale and aspect lost for good)."""
-        extent = foreground_extent(foreground, estimate, self.background.scale)
+        axes = self.config.extent_axes
+        extent = foreground_extent(foreground, estimate, self.background.scale, axes=axes)
         if extent is None and self.config.extent_wide > 1.6:
-            extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide)
+            extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide,
+                                       axes=axes)
         return extent
 
     def _extent_correction(self, estimate: np.ndarray) -> np.ndarray | None:
@@ -520,7 +533,8 @@ class AffineParticleFilter:
         if foreground is None:
             self.extent_counts["moving" if self.background.camera_moving else "untrusted"] += 1
             return None
-        if self.config.extent_still == "skip" and self.background.target_still:
+        self._still_run = self._still_run + 1 if self.background.target_still else 0
+        if self.config.extent_still == "skip" and self._still_run > self.config.extent_still_after:
             self.extent_counts["still"] += 1
             return None
         extent = self._silhouette(foreground, estimate)
@@ -532,7 +546,7 @@ class AffineParticleFilter:
             q = to_chart(estimate[None])
             q[0, 4] += float(np.clip(extent.axis_angle, -self.config.extent_rotation, self.config.extent_rotation))
             candidate = from_chart(q)[0]
-            extent = foreground_extent(foreground, candidate, self.background.scale) or extent
+            extent = foreground_extent(foreground, candidate, self.background.scale, axes=self.config.extent_axes) or extent
         if not _plausible(extent):
             self.extent_counts["implausible"] += 1
             return None
