@@ -191,8 +191,9 @@ class FilterConfig(AppearanceConfig):
     extent_axes: str = param("estimate", "static camera: the axes along which the foreground's extent is measured: "
                              "estimate (X̂'s own u and v: a rotation error of X̂ widens the rectangle, 7-10 %) or "
                              "silhouette (the silhouette's principal axes, the one nearer X̂'s u giving the width; X̂'s "
-                             "rotation is kept, left to the shape prior; static_background.foreground_extent)",
-                             choices=("estimate", "silhouette"))
+                             "rotation is kept, left to the shape prior; static_background.foreground_extent) or "
+                             "prior (the shape prior's running silhouette axis and its normal; X̂'s own until one is "
+                             "measured)", choices=("estimate", "silhouette", "prior"))
     flicker_gain: float = param(0.0, "static camera: a per-pixel threshold learnt outside the target, this times "
                                 "the pixel's own difference from the background (flickering edges, glare; 0: off; measured: "
                                 "median AUC up, but the scale overshoots at the stop under a light ramp)",
@@ -239,6 +240,10 @@ class FilterConfig(AppearanceConfig):
     background_rows: bool = param(True, "static camera: remove each image row's median difference from the background "
                                   "outside the target before the foreground threshold (a smooth sky's quantisation "
                                   "bands under a light change are row-wise offsets; false: one gain and offset only)")
+    background_freeze: float = param(0.0, "static camera: the background is not learnt inside X̂'s rectangle grown "
+                                     "this many times (the running median absorbs an aircraft that stands or grows "
+                                     "slowly at the stop; with it frozen, extent_still measure keeps the scale "
+                                     "corrected there; 0: learnt everywhere)", low=0.0, high=3.0)
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -335,7 +340,7 @@ class AffineParticleFilter:
                                            flicker_gain=config.flicker_gain, motion=config.motion_gain > 0,
                                            max_stale=config.max_stale, stale_window=config.stale_window,
                                            keep_first=config.start_refit + 1 if config.start_refit else 0,
-                                           row_offset=config.background_rows)
+                                           row_offset=config.background_rows, freeze=config.background_freeze)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
@@ -518,6 +523,8 @@ class AffineParticleFilter:
         when the silhouette runs off it, on the grid of ``extent_wide`` X̂ (a lagging or too narrow X̂ whose own
         target runs off the small grid: measured, that is a runaway, scale and aspect lost for good)."""
         axes = self.config.extent_axes
+        if axes == "prior":
+            axes = "estimate" if self._prior_rotation is None else float(self._prior_rotation)
         extent = foreground_extent(foreground, estimate, self.background.scale, axes=axes)
         if extent is None and self.config.extent_wide > 1.6:
             extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide,
@@ -546,7 +553,7 @@ class AffineParticleFilter:
             q = to_chart(estimate[None])
             q[0, 4] += float(np.clip(extent.axis_angle, -self.config.extent_rotation, self.config.extent_rotation))
             candidate = from_chart(q)[0]
-            extent = foreground_extent(foreground, candidate, self.background.scale, axes=self.config.extent_axes) or extent
+            extent = foreground_extent(foreground, candidate, self.background.scale) or extent
         if not _plausible(extent):
             self.extent_counts["implausible"] += 1
             return None
