@@ -96,6 +96,33 @@ def test_the_start_region_is_learnt_once_the_target_has_left_it():
     assert np.abs(model.background[region] - cv2_level(empty, s)[region]).mean() < 3.0
 
 
+@pytest.mark.parametrize("freeze", [0.0, 1.3])
+def test_a_standing_target_stays_foreground_only_with_the_background_frozen_under_it(freeze):
+    """background_freeze: a target that arrives and then stands still for 60 frames (contrast 60 grey levels,
+    the running median's step 2 a frame) is absorbed into B without the freeze (its foreground gone), and stays
+    foreground with B frozen inside its grown rectangle; outside it B still learns (a light step is followed)."""
+    rng = np.random.default_rng(5)
+    empty = stand(rng)
+    box = (120, 100, 60, 30)
+    state = ag.from_box(*box)
+    model = StaticBackground(freeze=freeze)
+    model.start(with_target(empty, (10, 10, 60, 30), rng=rng), ag.from_box(10, 10, 60, 30))
+    for _ in range(10):                                      # the start region is learnt, the target elsewhere
+        model.observe(with_target(empty, (200, 180, 60, 30), rng=rng), ag.from_box(200, 180, 60, 30))
+    target = np.clip(cv2_level(empty, 1.0)[100:130, 120:180].mean() + 60, 0, 255)
+    for _ in range(60):                                       # it arrives and stands
+        model.observe(with_target(empty + 5.0, box, value=float(target), rng=rng), state)
+    s = model.scale
+    inside = model.foreground[int(105 * s):int(125 * s), int(125 * s):int(175 * s)]
+    covered = float((inside > 0.5).mean())
+    if freeze > 0:
+        assert covered > 0.9, covered
+    else:
+        assert covered < 0.1, covered
+    corner = (slice(0, int(40 * s)), slice(int(250 * s), int(320 * s)))      # outside: the +5 step is learnt
+    assert np.abs(model.background[corner] - (cv2_level(empty, s)[corner] + 5.0)).mean() < 1.5
+
+
 def cv2_level(image, scale):
     import cv2  # noqa: PLC0415
 
