@@ -56,8 +56,8 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   fraction toward the rectangle of the foreground against the empty stand, measured in X̂'s own
   template frame (``static_background.py``), unless that costs Sim more than ``extent_max_drop``.
   The subspace learns a lag behind a growing aircraft; the background does not. ``extent_axes``
-  silhouette (session 11): the rectangle's sides are measured along the silhouette's principal axes, not
-  X̂'s (X̂'s rotation error inflated them, and the scale with them). Measured and off
+  silhouette (session 11): the rectangle's sides measured along the silhouette's principal axes, not
+  X̂'s (X̂'s rotation error inflated them): off, the held-out check did not confirm it. Measured and off
   by default: ``extent_rotation`` (the rectangle measured in X̂ turned toward the silhouette's
   principal axis) and ``flicker_gain`` (static_background.py); README, docking section.
 * ``motion_gain`` (static camera, on by default; session 6): the target's own motion between the
@@ -190,7 +190,7 @@ class FilterConfig(AppearanceConfig):
                                    "principal axis, by at most this much per frame [rad] (0: off, the rectangle "
                                    "keeps X̂'s rotation; measured: follows the turn, but from the first polygon the "
                                    "scale overshoots at the stop)", low=0.0, high=0.3)
-    extent_axes: str = param("silhouette", "static camera: the axes along which the foreground's extent is measured: "
+    extent_axes: str = param("estimate", "static camera: the axes along which the foreground's extent is measured: "
                              "estimate (X̂'s own u and v: a rotation error of X̂ widens the rectangle, 7-10 %) or "
                              "silhouette (the silhouette's principal axes, the one nearer X̂'s u giving the width; X̂'s "
                              "rotation is kept, left to the shape prior; static_background.foreground_extent) or "

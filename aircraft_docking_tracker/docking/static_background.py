@@ -81,8 +81,8 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   3x3, the connected components that overlap the rectangle; their bounding box ``[u0, u1] x [v0, v1]``
   is the measured rectangle (a silhouette that reaches the grid's border is not measured: it is
   merged with something larger than the target), with the principal axis of its cells in the image
-  (for ``extent_rotation`` in ``ispf.py``). With ``axes="silhouette"`` (``extent_axes`` in ``ispf.py``, the
-  default there since session 11) the sides are the cells' extents along the silhouette's own principal axes
+  (for ``extent_rotation`` in ``ispf.py``). With ``axes="silhouette"`` (``extent_axes`` in ``ispf.py``, off:
+  the tuning seeds' gains were not confirmed held out) the sides are the cells' extents along the silhouette's own principal axes
   instead (the estimate's rotation kept): along the estimate's axes a rotation error of the estimate gives the
   turned silhouette's bounding box, 1.35x too high for a 2:1 rectangle 10 deg off, and the scale followed it.
 * **Freeze** (``freeze``, off; ``background_freeze`` in ``ispf.py``): ``B`` not learnt inside the target's
