@@ -223,7 +223,7 @@ class FilterConfig(AppearanceConfig):
                                     "this many frames in a row of a still target (a slowly growing aircraft near the "
                                     "stop moves no corner by a level pixel a frame, yet its silhouette is fresh; the "
                                     "running background absorbs a standing one only over tens of frames; 0: skip from "
-                                    "the first)", low=0, high=100)
+                                    "the first; not measured yet)", low=0, high=100)
     extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
                                    "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
     start_refit: int = param(5, "static camera, a start from an axis-aligned box (a loose detector box): after this "
@@ -244,8 +244,8 @@ class FilterConfig(AppearanceConfig):
                                   "bands under a light change are row-wise offsets; false: one gain and offset only)")
     background_freeze: float = param(0.0, "static camera: the background is not learnt inside X̂'s rectangle grown "
                                      "this many times (the running median absorbs an aircraft that stands or grows "
-                                     "slowly at the stop; with it frozen, extent_still measure keeps the scale "
-                                     "corrected there; 0: learnt everywhere)", low=0.0, high=3.0)
+                                     "slowly at the stop; 0: learnt everywhere; measured at 1.3 with extent_still "
+                                     "measure: much worse on the tuning seeds, README)", low=0.0, high=3.0)
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
