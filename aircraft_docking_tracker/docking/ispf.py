@@ -55,7 +55,9 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
 * ``extent_gain`` (static camera, on by default): after step 7, X̂ and the particles move that
   fraction toward the rectangle of the foreground against the empty stand, measured in X̂'s own
   template frame (``static_background.py``), unless that costs Sim more than ``extent_max_drop``.
-  The subspace learns a lag behind a growing aircraft; the background does not. Measured and off
+  The subspace learns a lag behind a growing aircraft; the background does not. ``extent_axes``
+  silhouette (session 11): the rectangle's sides measured along the silhouette's principal axes, not
+  X̂'s (X̂'s rotation error inflated them): off, the held-out check did not confirm it. Measured and off
   by default: ``extent_rotation`` (the rectangle measured in X̂ turned toward the silhouette's
   principal axis) and ``flicker_gain`` (static_background.py); README, docking section.
 * ``motion_gain`` (static camera, on by default; session 6): the target's own motion between the
@@ -188,6 +190,12 @@ class FilterConfig(AppearanceConfig):
                                    "principal axis, by at most this much per frame [rad] (0: off, the rectangle "
                                    "keeps X̂'s rotation; measured: follows the turn, but from the first polygon the "
                                    "scale overshoots at the stop)", low=0.0, high=0.3)
+    extent_axes: str = param("estimate", "static camera: the axes along which the foreground's extent is measured: "
+                             "estimate (X̂'s own u and v: a rotation error of X̂ widens the rectangle, 7-10 %) or "
+                             "silhouette (the silhouette's principal axes, the one nearer X̂'s u giving the width; X̂'s "
+                             "rotation is kept, left to the shape prior; static_background.foreground_extent) or "
+                             "prior (the shape prior's running silhouette axis and its normal; X̂'s own until one is "
+                             "measured)", choices=("estimate", "silhouette", "prior"))
     flicker_gain: float = param(0.0, "static camera: a per-pixel threshold learnt outside the target, this times "
                                 "the pixel's own difference from the background (flickering edges, glare; 0: off; measured: "
                                 "median AUC up, but the scale overshoots at the stop under a light ramp)",
@@ -211,6 +219,11 @@ class FilterConfig(AppearanceConfig):
                               "or skip (the running background absorbs a standing aircraft: its silhouette shrinks, "
                               "and what is left merged with a flickering horizon widens it)",
                               choices=("measure", "skip"))
+    extent_still_after: int = param(0, "static camera, extent_still skip: the extent is still measured on the first "
+                                    "this many frames in a row of a still target (a slowly growing aircraft near the "
+                                    "stop moves no corner by a level pixel a frame, yet its silhouette is fresh; the "
+                                    "running background absorbs a standing one only over tens of frames; 0: skip from "
+                                    "the first; measured at 8: no better, README)", low=0, high=100)
     extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
                                    "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
     start_refit: int = param(5, "static camera, a start from an axis-aligned box (a loose detector box): after this "
@@ -229,6 +242,10 @@ class FilterConfig(AppearanceConfig):
     background_rows: bool = param(True, "static camera: remove each image row's median difference from the background "
                                   "outside the target before the foreground threshold (a smooth sky's quantisation "
                                   "bands under a light change are row-wise offsets; false: one gain and offset only)")
+    background_freeze: float = param(0.0, "static camera: the background is not learnt inside X̂'s rectangle grown "
+                                     "this many times (the running median absorbs an aircraft that stands or grows "
+                                     "slowly at the stop; 0: learnt everywhere; measured at 1.3 with extent_still "
+                                     "measure: much worse on the tuning seeds, README)", low=0.0, high=3.0)
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -325,12 +342,13 @@ class AffineParticleFilter:
                                            flicker_gain=config.flicker_gain, motion=config.motion_gain > 0,
                                            max_stale=config.max_stale, stale_window=config.stale_window,
                                            keep_first=config.start_refit + 1 if config.start_refit else 0,
-                                           row_offset=config.background_rows)
+                                           row_offset=config.background_rows, freeze=config.background_freeze)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
         self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
                              "invalid": 0}
+        self._still_run = 0                 # frames in a row the target was still (extent_still_after)
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "still": 0, "none": 0, "implausible": 0, "refused": 0}
 
     # ------------------------------------------------------------------ shared building blocks
@@ -462,7 +480,7 @@ class AffineParticleFilter:
         state = np.asarray(state, dtype=float)
         self._load(frame, state)
         self._initialise(state)
-        self._frames = 0
+        self._frames, self._still_run = 0, 0
         axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
         self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
         self._start_track = [(frame, state.copy())] if self._start_box is not None else []
@@ -506,9 +524,13 @@ class AffineParticleFilter:
         """The foreground's rectangle around X̂ (static_background.foreground_extent) on the grid of 1.6 X̂, or,
         when the silhouette runs off it, on the grid of ``extent_wide`` X̂ (a lagging or too narrow X̂ whose own
         target runs off the small grid: measured, that is a runaway, scale and aspect lost for good)."""
-        extent = foreground_extent(foreground, estimate, self.background.scale)
+        axes = self.config.extent_axes
+        if axes == "prior":
+            axes = "estimate" if self._prior_rotation is None else float(self._prior_rotation)
+        extent = foreground_extent(foreground, estimate, self.background.scale, axes=axes)
         if extent is None and self.config.extent_wide > 1.6:
-            extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide)
+            extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide,
+                                       axes=axes)
         return extent
 
     def _extent_correction(self, estimate: np.ndarray) -> np.ndarray | None:
@@ -520,7 +542,8 @@ class AffineParticleFilter:
         if foreground is None:
             self.extent_counts["moving" if self.background.camera_moving else "untrusted"] += 1
             return None
-        if self.config.extent_still == "skip" and self.background.target_still:
+        self._still_run = self._still_run + 1 if self.background.target_still else 0
+        if self.config.extent_still == "skip" and self._still_run > self.config.extent_still_after:
             self.extent_counts["still"] += 1
             return None
         extent = self._silhouette(foreground, estimate)
