@@ -154,7 +154,7 @@ class FilterConfig(AppearanceConfig):
                               "prior", low=0.0, high=1.0)
     rotation_pull: float = param(0.03, "shape_prior silhouette: fraction of a particle's rotation pulled to the "
                                  "silhouette's major axis per frame (0: off)", low=0.0, high=1.0)
-    rotation_gain: float = param(0.3, "shape_prior silhouette: fraction of this frame's angle between X̂'s u axis and "
+    rotation_gain: float = param(0.0, "shape_prior silhouette: fraction of this frame's angle between X̂'s u axis and "
                                  "the silhouette's major axis by which X̂ (and the particles) are turned about X̂'s "
                                  "centre, on the frames the silhouette is measured (0: off, only the particles' "
                                  "rotation_pull toward the running prior)", low=0.0, high=1.0)

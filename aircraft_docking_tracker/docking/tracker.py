@@ -60,7 +60,7 @@ class DockingConfig(FilterConfig):
     lost_score: float = param(0.75, "a frame whose best similarity Ŝ is below this counts as low",
                               low=0.0, high=1.0)
     lost_after: int = param(10, "consecutive low frames before the track is declared lost", low=1, high=10000)
-    lost_evidence: str = param("silhouette", "what makes a frame low: score = Ŝ below lost_score (the knife edge: a turned "
+    lost_evidence: str = param("score", "what makes a frame low: score = Ŝ below lost_score (the knife edge: a turned "
                                "track on the aircraft scores 0.67-0.75, a drifted one 0.71); silhouette = Ŝ below "
                                "lost_score and not vouched for by the static camera (the moving target's silhouette "
                                "around X̂ has X̂'s place and size on this frame, as the extent correction requires), "
