@@ -375,8 +375,8 @@ def test_the_loose_box_aspect_is_not_held_to_the_stop():
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
     frames, quads = scene_frames(config, 100)
-    # rotation_gain 0 (the default before session 11): with the turn (0.3, the default since) the late aspect error
-    # here is 0.21 (unset kernel, this machine), as large as the held one: the README's session-11 section says so
+    # rotation_gain 0 (the default): with the turn at 0.3 the late aspect error here is 0.21 (unset kernel, this
+    # machine), as large as the held one: the README's session-11 section says so
     defaults = np.median([late_aspect_error(frames, quads, s, rotation_gain=0.0) for s in range(3)])
     held = np.median([late_aspect_error(frames, quads, s, shape_prior="start", start_refit=0, rotation_gain=0.0)
                       for s in range(3)])
@@ -490,8 +490,8 @@ def restart_mid_approach(frames, quads, restart_background, seed, at=34, after=2
     fraction of the aircraft's true rectangle that is foreground."""
     import cv2  # noqa: PLC0415
 
-    # rotation_gain 0: measured so before session 11 (with the turn the new background's extent is measured on
-    # 0.65 of the frames, no longer under 0.5)
+    # rotation_gain 0 (the default): with the turn at 0.3 the new background's extent is measured on 0.65 of the
+    # frames, no longer under 0.5
     tracker = DockingTracker(DockingConfig(restart_background=restart_background, seed=seed, rotation_gain=0.0))
     tracker.start(frames[0], quads[0])
     for frame in frames[1:at]:
