@@ -134,6 +134,74 @@ def test_a_lost_track_recovers_after_enough_good_frames():
     assert states == [TRACKING, TRACKING, TRACKING, LOST, LOST, LOST, TRACKING, TRACKING]
 
 
+def test_a_low_score_the_static_camera_vouches_for_is_not_a_loss_with_lost_evidence_silhouette():
+    """lost_evidence silhouette: frames at Ŝ 0.70 (under lost_score 0.75, where a turned track on the aircraft
+    sits) whose silhouette agrees with X̂ (on_target) do not count toward a loss; the same scores without the
+    silhouette do; Ŝ under lost_floor counts whatever the silhouette says; the score rule ignores it; static also
+    spares a frame whose foreground is not trusted."""
+    frame, truth = next(moving_target_scene(1))
+
+    def states(scores, on_target, untrusted=False, **cfg):
+        tracker = DockingTracker(DockingConfig(**{"lost_after": 3, "recover_after": 2, "seed": 0, **cfg}))
+        tracker.start(frame, truth)
+        rows = iter(zip(scores, on_target))
+
+        def step(f):
+            score, flag = next(rows)
+            return FrameResult(truth, score, 20, False, truth[None], on_target=flag, untrusted=untrusted)
+
+        tracker.filter.step = step
+        return [tracker.step(frame).state for _ in scores]
+
+    turned = [0.70] * 8
+    assert states(turned, [True] * 8, lost_evidence="silhouette") == [TRACKING] * 8
+    assert states(turned, [False] * 8, lost_evidence="silhouette")[2:] == [LOST] * 6
+    assert states(turned, [True] * 8, lost_evidence="score")[2:] == [LOST] * 6
+    hidden = [0.5] * 8                                       # under lost_floor: lost whatever the silhouette
+    assert states(hidden, [True] * 8, lost_evidence="silhouette")[2:] == [LOST] * 6
+    # a vouched frame in a run of low ones breaks the run, and vouched frames recover a lost track
+    mixed = [False, False, True, False, False, True, False, False]
+    assert states(turned, mixed, lost_evidence="silhouette") == [TRACKING] * 8
+    late = [False] * 4 + [True] * 4
+    assert states(turned, late, lost_evidence="silhouette") == [TRACKING, TRACKING, LOST, LOST, LOST, TRACKING,
+                                                                TRACKING, TRACKING]
+    # static: a frame whose foreground is not trusted (rain, a light ramp) is no evidence against the track
+    assert states(turned, [False] * 8, untrusted=True, lost_evidence="static") == [TRACKING] * 8
+    assert states(turned, [False] * 8, untrusted=True, lost_evidence="silhouette")[2:] == [LOST] * 6
+    assert states(hidden, [False] * 8, untrusted=True, lost_evidence="static")[2:] == [LOST] * 6
+
+
+def test_the_static_camera_vouches_for_a_track_on_the_moving_aircraft_and_never_for_one_on_the_stand():
+    """FrameResult.on_target (the evidence of lost_evidence silhouette): a 40-frame approach tracked from the
+    first polygon has the aircraft's silhouette around X̂ on about a third of the frames (0.32-0.35: from when
+    the stand is learnt to when the aircraft outgrows X̂ near the stop); a track parked on an empty part of
+    the stand (nothing moves there, Ŝ 0.99) on none. On a clear stand the foreground around the track on the
+    aircraft is trusted throughout (``untrusted``, what lost_evidence static spares, never set; around the parked
+    track it is not on half the frames: the grown aircraft is more than max_foreground_outside of the rest).
+    Medians over 3 tracker seeds."""
+    from test_docking_static_background import scene_frames  # noqa: PLC0415
+    from aircraft_docking_tracker.scenarios.docking import DockingSceneConfig  # noqa: PLC0415
+
+    config = DockingSceneConfig(width=640, height=480, frames=40, weather="clear", occluder="none", growth=3.0,
+                                turn_deg=20, difficulty=1)
+    frames, quads = scene_frames(config, 7)
+
+    def vouched(start, seed):
+        tracker = DockingTracker(DockingConfig(seed=seed))
+        tracker.start(frames[0], start)
+        step, flags = tracker.filter.step, []
+        tracker.filter.step = lambda f: flags.append(step(f)) or flags[-1]
+        for frame in frames[1:]:
+            tracker.step(frame)
+        return np.mean([r.on_target for r in flags]), np.mean([r.untrusted for r in flags])
+
+    on_aircraft = np.median([vouched(quads[0], s) for s in range(3)], axis=0)
+    on_stand = np.median([vouched(ag.from_box(80, 340, 160, 100), s) for s in range(3)], axis=0)
+    assert on_aircraft[0] >= 0.2
+    assert on_stand[0] <= 0.02
+    assert on_aircraft[1] <= 0.02         # a clear stand's foreground is trusted around a track on the aircraft
+
+
 def test_the_detector_overrides_a_track_it_keeps_seeing_the_aircraft_away_from():
     """The override rule: a track started on the wrong place (a stand structure hiding the aircraft)
     restarts on the aircraft detection once the detector has seen it away from the track, at the same

@@ -426,8 +426,11 @@ def test_the_loose_box_aspect_is_not_held_to_the_stop():
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
     frames, quads = scene_frames(config, 100)
-    defaults = np.median([late_aspect_error(frames, quads, s) for s in range(3)])
-    held = np.median([late_aspect_error(frames, quads, s, shape_prior="start", start_refit=0) for s in range(3)])
+    # rotation_gain 0 (the default): with the turn at 0.3 the late aspect error here is 0.21 (unset kernel, this
+    # machine), as large as the held one: the README's session-11 section says so
+    defaults = np.median([late_aspect_error(frames, quads, s, rotation_gain=0.0) for s in range(3)])
+    held = np.median([late_aspect_error(frames, quads, s, shape_prior="start", start_refit=0, rotation_gain=0.0)
+                      for s in range(3)])
     assert held > 0.17, held                                   # the loose box's aspect, held
     assert defaults < 0.17 and defaults < held - 0.05, (defaults, held)
 
@@ -538,7 +541,9 @@ def restart_mid_approach(frames, quads, restart_background, seed, at=34, after=2
     fraction of the aircraft's true rectangle that is foreground."""
     import cv2  # noqa: PLC0415
 
-    tracker = DockingTracker(DockingConfig(restart_background=restart_background, seed=seed))
+    # rotation_gain 0 (the default): with the turn at 0.3 the new background's extent is measured on 0.65 of the
+    # frames, no longer under 0.5
+    tracker = DockingTracker(DockingConfig(restart_background=restart_background, seed=seed, rotation_gain=0.0))
     tracker.start(frames[0], quads[0])
     for frame in frames[1:at]:
         tracker.step(frame)

@@ -313,6 +313,12 @@ class FrameResult:
     particles: int
     updated: bool
     particle_states: np.ndarray = field(repr=False)
+    #: static camera: the foreground's silhouette around X̂ was plausible on this frame (sides 0.6-1.5x X̂'s,
+    #: centre within 0.3 sides: the extent correction was measured), i.e. what moves there has X̂'s place and size
+    on_target: bool = False
+    #: static camera: its foreground is not trusted on this frame (much of the scene outside X̂ changed: rain, a
+    #: light ramp), the camera not judged moving: no evidence for or against the track
+    untrusted: bool = False
 
 
 class AffineParticleFilter:
@@ -695,7 +701,9 @@ class AffineParticleFilter:
             self._start_box, self._start_track = None, []
             if refitted is not None:
                 estimate, score, states = refitted, float(self._score(refitted[None])[0][0]), refitted[None]
-        return FrameResult(estimate, score, len(states), bool(updated), states)
+        untrusted = (self.config.extent_gain > 0 and self.background.foreground is None
+                     and not self.background.camera_moving)
+        return FrameResult(estimate, score, len(states), bool(updated), states, correction is not None, untrusted)
 
     def _start_refit(self, estimate: np.ndarray) -> np.ndarray | None:
         """``start_refit``: X̂ re-fitted (and the filter started again there) to the start silhouette (static_background.start_silhouette), or None.

@@ -21,6 +21,12 @@ all day must settle what happens before the aircraft appears and when the track 
   aircraft ``override_after`` times away from the track (no row of the class overlapping the
   track's box by ``override_iou``), each time where it found it the time before, the filter
   restarts on that detection.
+  **Evidence** (``lost_evidence``): the score alone is a knife edge on a stand (a track on the aircraft, turned
+  by ``rotation_gain``, sat at Ŝ 0.67-0.73 with IoU 0.78 and was declared lost; a drifted one scores 0.71).
+  ``silhouette``: a frame under ``lost_score`` does not count while the static camera vouches for the track (the
+  moving target's silhouette around X̂ has X̂'s place and size, ``FrameResult.on_target``) and Ŝ is at least
+  ``lost_floor`` (a hidden target scores about 0.5); ``static`` also spares the frames whose foreground is not
+  trusted (rain, a light ramp: no evidence against the track). A moving camera has neither: the score decides.
 * **lost** (state 1): the filter keeps running where it was (the aircraft may come back from behind
   a vehicle) and the track is reported again after ``recover_after`` consecutive frames at or
   above ``lost_score``; meanwhile a detection of the aircraft class restarts the filter on it
@@ -57,6 +63,16 @@ class DockingConfig(FilterConfig):
     lost_score: float = param(0.75, "a frame whose best similarity Ŝ is below this counts as low",
                               low=0.0, high=1.0)
     lost_after: int = param(10, "consecutive low frames before the track is declared lost", low=1, high=10000)
+    lost_evidence: str = param("score", "what makes a frame low: score = Ŝ below lost_score (the knife edge: a turned "
+                               "track on the aircraft scores 0.67-0.75, a drifted one 0.71); silhouette = Ŝ below "
+                               "lost_score and not vouched for by the static camera (the moving target's silhouette "
+                               "around X̂ has X̂'s place and size on this frame, as the extent correction requires), "
+                               "or Ŝ below lost_floor whatever the camera says; a moving camera has no silhouette: "
+                               "the score alone; static = silhouette, and a frame whose static-camera foreground "
+                               "is not trusted (much of the scene changed: rain, a light ramp) is judged by "
+                               "lost_floor too (no evidence against the track)", choices=("score", "silhouette", "static"))
+    lost_floor: float = param(0.6, "lost_evidence silhouette, static: a frame whose Ŝ is below this is low even when the "
+                              "silhouette vouches for it (a hidden target scores about 0.5)", low=0.0, high=1.0)
     recover_after: int = param(5, "consecutive good frames for a lost track to be reported again",
                                low=1, high=10000)
     detection_class: int = param(-1, "class_id of the aircraft in detections (-1: any class)",
@@ -206,7 +222,7 @@ class DockingTracker:
             if box is not None:
                 return self.start(frame, box, detected=True)
         r = self.filter.step(frame)
-        low = r.score < self.config.lost_score
+        low = self._low_frame(r)
         self._low = self._low + 1 if low else 0
         self._good = 0 if low else self._good + 1
         if self.state == TRACKING and self._low >= self.config.lost_after:
@@ -215,6 +231,14 @@ class DockingTracker:
             self.state = TRACKING
         return DockingResult(self.state, r.state, r.score, r.particles, False, r.particle_states)
 
+    def _low_frame(self, r) -> bool:
+        """Whether a frame counts toward a loss (``lost_score``, ``lost_evidence``, ``lost_floor``)."""
+        cfg = self.config
+        if r.score >= cfg.lost_score:
+            return False
+        if cfg.lost_evidence == "score" or r.score < cfg.lost_floor:
+            return True
+        return not (r.on_target or (cfg.lost_evidence == "static" and r.untrusted))
 
     def _detected_away(self, detections: np.ndarray | None) -> np.ndarray | None:
         """The override rule: the aircraft detection to restart on, or None. A frame counts when no row of
