@@ -110,7 +110,7 @@ import numpy as np
 from . import affine_group as ag
 from .appearance import AppearanceConfig, ObservationModel, PoseEstimator
 from ..config import ConfigError, param
-from .static_background import StaticBackground, foreground_extent, start_silhouette
+from .static_background import StaticBackground, foreground_extent, half_turn, start_silhouette
 
 
 class FrameError(ValueError):
@@ -417,7 +417,7 @@ class AffineParticleFilter:
         q[:, 5] *= 1.0 - self.config.skew_pull
         q[:, 3] += self.config.aspect_pull * (self._prior_log_aspect - q[:, 3])
         if self._prior_rotation is not None and self.config.rotation_pull > 0:
-            turn = (self._prior_rotation - q[:, 4] + np.pi / 2) % np.pi - np.pi / 2     # an axis: modulo pi
+            turn = half_turn(self._prior_rotation - q[:, 4])
             q[:, 4] += self.config.rotation_pull * turn
         return from_chart(q)
 
@@ -588,7 +588,7 @@ class AffineParticleFilter:
         extent = self._silhouette(foreground, estimate)
         if extent is None or not _plausible(extent):
             return None
-        turn = (extent.axis_angle + np.pi / 2) % np.pi - np.pi / 2
+        turn = half_turn(extent.axis_angle)
         log_elongation = float(np.log(max(extent.elongation, 1.0)))
         self._elongation = extent.elongation
         if abs(turn) > np.pi / 4:             # X̂'s u axis is nearer the silhouette's minor axis
@@ -605,7 +605,7 @@ class AffineParticleFilter:
         if self._prior_rotation is None:
             self._prior_rotation = measured
         else:
-            self._prior_rotation += rate * ((measured - self._prior_rotation + np.pi / 2) % np.pi - np.pi / 2)
+            self._prior_rotation += rate * half_turn(measured - self._prior_rotation)
         return turn
 
     def _agrees(self, estimate: np.ndarray, turn: float) -> bool:
@@ -615,7 +615,7 @@ class AffineParticleFilter:
         if self._elongation < TURN_MIN_ELONGATION or self._prior_rotation is None:
             return False
         u_angle = float(np.arctan2(estimate[1, 0], estimate[0, 0]))
-        prior_turn = (self._prior_rotation - u_angle + np.pi / 2) % np.pi - np.pi / 2
+        prior_turn = half_turn(self._prior_rotation - u_angle)
         return prior_turn * turn > 0
 
     def _turn_to_silhouette(self, estimate: np.ndarray, turn: float) -> np.ndarray:

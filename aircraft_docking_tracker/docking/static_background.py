@@ -342,10 +342,21 @@ def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, 
     ys, xs = np.nonzero(mask)
     if len(xs) < min_pixels:
         return None
-    evals, evecs = np.linalg.eigh(np.cov(np.stack([xs, ys]).astype(float)))
-    angle = (float(np.arctan2(evecs[1, 1], evecs[0, 1])) + np.pi / 2) % np.pi - np.pi / 2
-    elongation = float(np.sqrt(max(evals[1], 1e-12) / max(evals[0], 1e-12)))
+    major, elongation = principal_axis(np.stack([xs, ys]).astype(float))
+    angle = half_turn(float(np.arctan2(major[1], major[0])))
     return StartSilhouette(angle, elongation, float(moved[outside].mean()), int(len(xs)))
+
+
+def principal_axis(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """The major principal axis of 2 x n ``points`` (a unit vector: the covariance's leading eigenvector) and
+    the elongation, the ratio of the major to the minor standard deviation (a filled w x h rectangle's is w / h)."""
+    evals, evecs = np.linalg.eigh(np.cov(points))
+    return evecs[:, 1], float(np.sqrt(max(evals[1], 1e-12) / max(evals[0], 1e-12)))
+
+
+def half_turn(angle):
+    """An axis's angle (or angles) in [-pi/2, pi/2): an axis has no direction, so angles are modulo pi."""
+    return (angle + np.pi / 2) % np.pi - np.pi / 2
 
 
 def row_offsets(signed: np.ndarray, outside: np.ndarray, min_count: int = 16, max_offset: float = 2.0) -> np.ndarray:
@@ -400,13 +411,11 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
         return None
     # principal axis of the silhouette's cells in image pixels, against the template's u axis
     linear = np.asarray(state, dtype=float)[:2, :2]
-    evals, evecs = np.linalg.eigh(np.cov(linear @ np.stack([u[xs], u[ys]])))
-    angle = float(np.arctan2(evecs[1, 1], evecs[0, 1]) - np.arctan2(linear[1, 0], linear[0, 0]))
-    angle = (angle + np.pi / 2) % np.pi - np.pi / 2
-    elongation = float(np.sqrt(max(evals[1], 1e-12) / max(evals[0], 1e-12)))
+    major, elongation = principal_axis(linear @ np.stack([u[xs], u[ys]]))
+    angle = half_turn(float(np.arctan2(major[1], major[0]) - np.arctan2(linear[1, 0], linear[0, 0])))
     cell = extent / n
     if not isinstance(axes, str) or (axes == "silhouette" and elongation >= min_elongation):
-        major = evecs[:, 1] if isinstance(axes, str) else np.array([np.cos(axes), np.sin(axes)])
+        major = major if isinstance(axes, str) else np.array([np.cos(axes), np.sin(axes)])
         centre_u, centre_v, width, height = _principal_sides(linear, u[xs], u[ys], cell, major)
         return Extent(centre_u, centre_v, width, height, angle, elongation)
     u0, u1 = u[xs.min()] - cell / 2, u[xs.max()] + cell / 2
