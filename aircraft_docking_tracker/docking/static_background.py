@@ -195,9 +195,13 @@ class StaticBackground:
         self._still = np.zeros(image.shape, np.int32)
         self._previous = image
         self.flicker = np.zeros(image.shape, np.float32) if self.flicker_gain > 0 else None
-        self.foreground, self.trusted, self.motion = None, False, None
         self.still_run = self.still_frames + 1         # a stand camera: still until a frame says otherwise
         self._stale, self.camera_moving = [], False
+        self._drop_track(image)
+
+    def _drop_track(self, image: np.ndarray) -> None:
+        """Forget what belongs to a track (its foreground and motion; the ``keep_first`` frames start at ``image``)."""
+        self.foreground, self.trusted, self.motion = None, False, None
         self.first = [image] if self.keep_first > 0 else []
 
     def restart(self, frame: np.ndarray, state: np.ndarray) -> None:
@@ -212,8 +216,7 @@ class StaticBackground:
         if self.background is None or image.shape != self.background.shape:
             self.start(frame, state)
             return
-        self.foreground, self.trusted, self.motion = None, False, None
-        self.first = [image] if self.keep_first > 0 else []
+        self._drop_track(image)
         self._learn(image)
 
     @property
