@@ -81,7 +81,7 @@ def _counts(detector, seed: int) -> tuple[int, int, int]:
 
 def test_uav_setup_detects_the_vehicles_of_held_out_scenes(detector):
     """Pooled over four held-out scenes (a scene at this altitude shows only a few vehicles at a time).
-    Below issue 12's targets (see README): the bounds say the set-up finds half the vehicles and is not
+    Below issue 12's targets (see docs/uav_camera.md): the bounds say the set-up finds half the vehicles and is not
     drowned in false alarms, with margin under what bench/uav_detector.py measures; and that it beats
     the previous upright-window set-up side by side on both rates."""
     counts = np.array([_counts(detector, seed) for seed in UAV_EVAL_SEEDS[900:904]])

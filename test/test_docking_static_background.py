@@ -427,7 +427,7 @@ def test_the_loose_box_aspect_is_not_held_to_the_stop():
                                 growth=4.0, turn_deg=20.0, difficulty=1)
     frames, quads = scene_frames(config, 100)
     # rotation_gain 0 (the default): with the turn at 0.3 the late aspect error here is 0.21 (unset kernel, this
-    # machine), as large as the held one: the README's session-11 section says so
+    # machine), as large as the held one: docs/docking_tracker.md's session-11 section says so
     defaults = np.median([late_aspect_error(frames, quads, s, rotation_gain=0.0) for s in range(3)])
     held = np.median([late_aspect_error(frames, quads, s, shape_prior="start", start_refit=0, rotation_gain=0.0)
                       for s in range(3)])

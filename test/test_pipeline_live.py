@@ -72,6 +72,6 @@ def test_docking_tracker_live_equals_offline_and_follows_the_aircraft(scenes, tm
         precisions.append(s["precision"])
     # the static-camera extent raised the median AUC here from 0.59 to 0.64 and moved the centre: the
     # foreground's box is 3-30 % taller than the template rectangle at the true state (the 5x5 blur, what
-    # lies under the aircraft), so precision@20px fell from 1.0 to 0.63 (README, docking section)
+    # lies under the aircraft), so precision@20px fell from 1.0 to 0.63 (docs/docking_tracker.md)
     assert np.median(aucs) > 0.55, aucs
     assert np.median(precisions) > 0.5, precisions

@@ -59,7 +59,7 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   silhouette (session 11): the rectangle's sides measured along the silhouette's principal axes, not
   X̂'s (X̂'s rotation error inflated them): off, the held-out check did not confirm it. Measured and off
   by default: ``extent_rotation`` (the rectangle measured in X̂ turned toward the silhouette's
-  principal axis) and ``flicker_gain`` (static_background.py); README, docking section.
+  principal axis) and ``flicker_gain`` (static_background.py); docs/docking_tracker.md.
 * ``motion_gain`` (static camera, on by default; session 6): the target's own motion between the
   previous frame and this one, M (``static_background.target_motion``: corners under X̂_{t-1} that
   moved, Lucas-Kanade, a similarity fitted with RANSAC), replaces the AR momentum of eq. 4 (the
@@ -223,7 +223,7 @@ class FilterConfig(AppearanceConfig):
                                     "this many frames in a row of a still target (a slowly growing aircraft near the "
                                     "stop moves no corner by a level pixel a frame, yet its silhouette is fresh; the "
                                     "running background absorbs a standing one only over tens of frames; 0: skip from "
-                                    "the first; measured at 8: no better, README)", low=0, high=100)
+                                    "the first; measured at 8: no better, docs/docking_tracker.md)", low=0, high=100)
     extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
                                    "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
     start_refit: int = param(5, "static camera, a start from an axis-aligned box (a loose detector box): after this "
@@ -245,7 +245,7 @@ class FilterConfig(AppearanceConfig):
     background_freeze: float = param(0.0, "static camera: the background is not learnt inside X̂'s rectangle grown "
                                      "this many times (the running median absorbs an aircraft that stands or grows "
                                      "slowly at the stop; 0: learnt everywhere; measured at 1.3 with extent_still "
-                                     "measure: much worse on the tuning seeds, README)", low=0.0, high=3.0)
+                                     "measure: much worse on the tuning seeds, docs/docking_tracker.md)", low=0.0, high=3.0)
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)

@@ -210,7 +210,7 @@ class StaticBackground:
         ratio and still run); only what belongs to the old track is dropped (this frame's foreground and
         motion; the ``keep_first`` frames start again at ``frame``), and ``frame`` is learnt as any frame.
         ``start`` instead makes the region around ``state`` unknown until the aircraft has left it; mid-approach
-        it never leaves it, so no foreground was measured there again (README, docking section, "Session 10:
+        it never leaves it, so no foreground was measured there again (docs/docking_tracker.md, "Session 10:
         restarts"). A frame of another size than ``B`` starts afresh."""
         image = _level_image(frame, self.level)
         if self.background is None or image.shape != self.background.shape:

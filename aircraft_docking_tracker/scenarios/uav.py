@@ -37,7 +37,7 @@ STATE_VISIBLE, STATE_HIDDEN = 1, 2
 SPRITE_SUPERSAMPLE = 4
 # The camera height the UAV set-up (config/uav_camera.yaml, uav_vehicles_heading_all_views.json) is made for: 3x lower
 # than the scene's default, so that vehicles' shorter box sides are >= 33 px (5th percentile 39 px)
-# instead of >= 10 px; see README "The UAV camera".
+# instead of >= 10 px; see docs/uav_camera.md.
 UAV_SETUP_GROUND_RESOLUTION = 3.0
 # Seed ranges of the UAV set-up's protocol (disjoint): cascade training, choice of the operating point,
 # evaluation (bench/uav_detector.py, the tests). The demo's seed 106 is in none of the first two.
