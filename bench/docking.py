@@ -453,9 +453,15 @@ def failure_kind(iou: np.ndarray, auc: float) -> str:
     return "poor fit"
 
 
+#: The diagnosis's starts and their tracker seeds (None: ``--seeds``).
+DIAGNOSIS_STARTS = {"box": None, "polygon": 1, "detector": 2}
+START_NAMES = {"box": "loose box", "polygon": "first polygon", "detector": "stand cascade"}
+
+
 def run_diagnosis(seeds: int) -> None:
     """``--diagnose``: the default ISPF on the tuning approaches (seeds 100-119 of 150 frames, 150-159 of 60)
-    from the loose box (``seeds`` tracker seeds) and the first polygon (one seed), in the live-like loop
+    from the loose box (``seeds`` tracker seeds), the first polygon (one seed) and the stand cascade's first
+    aircraft row (two seeds: two changes that helped the other starts lowered it held out), in the live-like loop
     of run_ours; per phase of the approach the mean IoU, the signed parameter errors and what each exact
     component would win; runs by failure kind, weather and occluder (results/docking_diagnosis.*)."""
     started = time.time()
@@ -464,8 +470,8 @@ def run_diagnosis(seeds: int) -> None:
     with tempfile.TemporaryDirectory(prefix="bench_docking_") as tmp_name:
         for set_name, (seed0, count, frames) in sets.items():
             for seq in docking_sequences(Path(tmp_name), count, frames, seed0):
-                for start, n in (("box", seeds), ("polygon", 1)):
-                    for s in range(n):
+                for start, n in DIAGNOSIS_STARTS.items():
+                    for s in range(seeds if n is None else n):
                         out = run_ours(seq, {}, s, start)
                         auc = score(seq, out)["success_auc"]
                         errors = frame_errors(out["quads"], seq["gt_quads"])
@@ -485,19 +491,19 @@ def run_diagnosis(seeds: int) -> None:
 def diagnosis_markdown(runs: list[dict], seeds: int, runtime: float) -> list[str]:
     md = ["## Docking tracker: where the IoU is lost (tuning seeds, issue 11)", "",
           f"`python bench/docking.py --diagnose`: the default ISPF in the bench's live-like loop (stand rules, the "
-          f"cascade's rows every frame) on the tuning approaches, from the loose box ({seeds} tracker seeds) and the "
-          "first polygon (1 seed). Per phase (fraction of the run's frames): mean polygon IoU; medians over runs of "
+          f"cascade's rows every frame) on the tuning approaches, from the loose box ({seeds} tracker seeds), the "
+          "first polygon (1 seed) and the stand cascade's first aircraft row (2 seeds). Per phase (fraction of the run's frames): mean polygon IoU; medians over runs of "
           "each run's median signed error: log(scale / truth), log(aspect / truth), |rotation error|, the centre's "
           "offset along the true quadrilateral's axes (du in its widths, dv in its heights, + = right / down); and "
           "the mean IoU one exact parameter group would add (the groups' gains do not add up). "
           f"Runtime {runtime / 60:.1f} min.", ""]
     for set_name in dict.fromkeys(r["set"] for r in runs):
-        for start in ("box", "polygon"):
+        for start in DIAGNOSIS_STARTS:
             rs = [r for r in runs if r["set"] == set_name and r["start"] == start]
             if not rs:
                 continue
             a = np.array([r["auc"] for r in rs])
-            md += [f"### {set_name}, {'loose box' if start == 'box' else 'first polygon'} start: {len(rs)} runs, "
+            md += [f"### {set_name}, {START_NAMES[start]} start: {len(rs)} runs, "
                    f"{np.mean(a >= 0.5):.0%} >= 0.5, median {np.median(a):.3f}, mean {a.mean():.3f}, worst {a.min():.3f}",
                    "", "| phase | mean IoU | frames IoU < 0.5 | log scale | log aspect | abs rotation err [deg] | du | dv | "
                    + " | ".join(f"+IoU exact {c}" for c in COMPONENTS) + " |",
