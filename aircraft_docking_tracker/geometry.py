@@ -53,3 +53,17 @@ def scale_boxes(boxes, factor: float) -> np.ndarray:
     """``(n, 4)`` boxes x, y, w, h scaled about their centres by ``factor``."""
     boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
     return np.column_stack([boxes[:, :2] + (1 - factor) * boxes[:, 2:] / 2, boxes[:, 2:] * factor])
+
+
+def boxes_hold(boxes, points) -> np.ndarray:
+    """Whether each box ``(n, 4)`` x, y, w, h holds its point ``(n, 2)`` (or one point ``(2,)`` for all boxes)."""
+    boxes, points = np.asarray(boxes, np.float64), np.asarray(points, np.float64)
+    return ((points[..., 0] >= boxes[:, 0]) & (points[..., 0] <= boxes[:, 0] + boxes[:, 2])
+            & (points[..., 1] >= boxes[:, 1]) & (points[..., 1] <= boxes[:, 1] + boxes[:, 3]))
+
+
+def centres_agree(boxes, box) -> np.ndarray:
+    """Per box of ``(n, 4)``: whether it holds the centre of ``box`` (one x, y, w, h) and ``box`` holds its centre
+    (the two agree on where the object is, whatever their sizes and IoU)."""
+    boxes, box = np.asarray(boxes, np.float64).reshape(-1, 4), np.asarray(box, np.float64)
+    return boxes_hold(boxes, box[:2] + box[2:] / 2) & boxes_hold(box[None], boxes[:, :2] + boxes[:, 2:] / 2)

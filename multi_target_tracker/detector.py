@@ -536,7 +536,7 @@ class Detector:
         low = None
         if self.verifier is not None:
             boxes, scores, low = self._verified(image[y0:y0 + gray.shape[0], x0:x0 + gray.shape[1]], boxes, scores,
-                                           cfg.window_margin if last_stage_margin is None else last_stage_margin)
+                                                cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.box_regressor is not None:
             boxes, scores = self._regressed(boxes, scores, gray.shape[::-1],
                                             cfg.window_margin if last_stage_margin is None else last_stage_margin)

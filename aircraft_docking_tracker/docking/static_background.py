@@ -429,9 +429,10 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
 def _principal_sides(linear: np.ndarray, us: np.ndarray, vs: np.ndarray, cell: float,
                      major: np.ndarray) -> tuple[float, float, float, float]:
     """The silhouette's cells (template coordinates ``us``, ``vs``, side ``cell``) measured along its own principal
-    axes in the image (``major``: the unit image direction of one of them): ``(centre_u, centre_v, width, height)`` in the template frame of the state whose linear part
-    is ``linear`` (2x2, image per template unit), the width being the extent along whichever principal axis is
-    nearer the state's u axis over the length of that axis, the height likewise.
+    axes in the image (``major``: the unit image direction of one of them): ``(centre_u, centre_v, width,
+    height)`` in the template frame of the state whose linear part is ``linear`` (2x2, image per template unit),
+    the width being the extent along whichever principal axis is nearer the state's u axis over the length of
+    that axis, the height likewise.
 
     Why (issue 11, session 11): the bounding box along the state's own axes is the silhouette's turned
     rectangle's bounding box when the state's rotation is off (by 5 deg on a 2:1 aircraft: 4 % wider, 17 %
@@ -442,8 +443,7 @@ def _principal_sides(linear: np.ndarray, us: np.ndarray, vs: np.ndarray, cell: f
     points = (np.stack([us, vs], 1)[:, None, :] + corners[None]).reshape(-1, 2) @ linear.T   # image offsets
     a_u, a_v = np.linalg.norm(linear[:, 0]), np.linalg.norm(linear[:, 1])
     minor = np.array([-major[1], major[0]])
-    axis_u, axis_v = (major, minor) if abs(major @ linear[:, 0]) / a_u >= abs(minor @ linear[:, 0]) / a_u \
-        else (minor, major)
+    axis_u, axis_v = (major, minor) if abs(major @ linear[:, 0]) >= abs(minor @ linear[:, 0]) else (minor, major)
     along_u, along_v = points @ axis_u, points @ axis_v
     centre = axis_u * (along_u.max() + along_u.min()) / 2 + axis_v * (along_v.max() + along_v.min()) / 2
     centre_u, centre_v = np.linalg.solve(linear, centre)

@@ -40,7 +40,7 @@ import numpy as np
 
 from . import affine_group as ag
 from ..config import ConfigError, param
-from ..geometry import box_iou
+from ..geometry import box_iou, centres_agree
 from .ispf import FilterConfig, make_filter
 from ..object_table import table_boxes
 
@@ -81,7 +81,9 @@ class DockingConfig(FilterConfig):
                                        low=-1e9, high=1e9)
     start_after: int = param(1, "a start or re-acquisition on the detector needs the aircraft row at the same place "
                              "(IoU >= 0.3 with the last one) on this many frames with rows in a row (frames without "
-                             "rows do not break the run; 1: the first row. Measured from the stand cascade on tuning seeds 100-119 / 150-159: 2 and 3 lose more frames waiting than the looser first box costs, 60 f median 0.601 -> 0.533 / 0.581)", low=1, high=1000)
+                             "rows do not break the run; 1: the first row. Measured from the stand cascade on tuning "
+                             "seeds 100-119 / 150-159: 2 and 3 lose more frames waiting than the looser first box "
+                             "costs, 60 f median 0.601 -> 0.533 / 0.581)", low=1, high=1000)
     override_after: int = param(5, "while tracking, restart on the aircraft detection after this many frames "
                                 "in which the detector saw the aircraft only away from the track, each time at "
                                 "the same place (0: detections are ignored while tracking)", low=0, high=10000)
@@ -211,7 +213,7 @@ class DockingTracker:
         if self.state != TRACKING:
             box = best_detection(detections, self.config.detection_class, self.config.min_detection_score)
             if box is not None and not (self.state == LOST and self.config.keep_agreeing
-                                        and _agree(box[None], ag.to_box(self.filter.estimate))[0]):
+                                        and centres_agree(box[None], ag.to_box(self.filter.estimate))[0]):
                 self._seen, self._seen_box = _run_at(self._seen, self._seen_box, box), box
                 if self._seen >= self.config.start_after:
                     return self.start(frame, box, detected=True)
@@ -255,7 +257,7 @@ class DockingTracker:
         boxes, track = table_boxes(rows), ag.to_box(self.filter.estimate)
         on_track = box_iou(boxes, track) >= cfg.override_iou
         if cfg.keep_agreeing:
-            on_track |= _agree(boxes, track)
+            on_track |= centres_agree(boxes, track)
         if on_track.any():
             self._away, self._away_box = 0, None
             return None
@@ -267,17 +269,6 @@ def _run_at(count: int, last: np.ndarray | None, box: np.ndarray) -> int:
     """Frames in a row the detector has seen the aircraft at ``box``'s place: ``count`` + 1 when ``box`` overlaps
     the last counted row ``last`` by IoU >= 0.3, else 1 (it is somewhere new)."""
     return count + 1 if last is not None and box_iou(box, last) >= 0.3 else 1
-
-
-def _holds(boxes: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Whether each box (x, y, w, h) holds its point (or one point for all boxes)."""
-    return ((points[..., 0] >= boxes[:, 0]) & (points[..., 0] <= boxes[:, 0] + boxes[:, 2])
-            & (points[..., 1] >= boxes[:, 1]) & (points[..., 1] <= boxes[:, 1] + boxes[:, 3]))
-
-
-def _agree(boxes: np.ndarray, track: np.ndarray) -> np.ndarray:
-    """Per box (x, y, w, h): whether it holds the centre of ``track`` (a box) and ``track`` holds its centre."""
-    return _holds(boxes, track[:2] + track[2:] / 2) & _holds(track[None], boxes[:, :2] + boxes[:, 2:] / 2)
 
 
 def _as_state(where) -> np.ndarray:
