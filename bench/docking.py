@@ -458,21 +458,27 @@ DIAGNOSIS_STARTS = {"box": None, "polygon": 1, "detector": 2}
 START_NAMES = {"box": "loose box", "polygon": "first polygon", "detector": "stand cascade"}
 
 
-def run_diagnosis(seeds: int) -> None:
+def run_diagnosis(seeds: int, overrides: dict | None = None, held_out: bool = False, tag: str = "") -> None:
     """``--diagnose``: the default ISPF on the tuning approaches (seeds 100-119 of 150 frames, 150-159 of 60)
     from the loose box (``seeds`` tracker seeds), the first polygon (one seed) and the stand cascade's first
     aircraft row (two seeds: two changes that helped the other starts lowered it held out), in the live-like loop
     of run_ours; per phase of the approach the mean IoU, the signed parameter errors and what each exact
-    component would win; runs by failure kind, weather and occluder (results/docking_diagnosis.*)."""
+    component would win; runs by failure kind, weather and occluder (results/docking_diagnosis.*).
+    ``overrides`` (``--set key=value``) change the defaults; ``held_out`` runs the report's approaches instead
+    (seeds 200-219 and 300-309: to confirm a choice made on the tuning seeds, once); ``tag`` names the files
+    (results/docking_diagnosis_<tag>.*) so that experiments do not overwrite the committed diagnosis."""
     started = time.time()
-    sets = {"150 f (seeds 100-119)": (TUNE_SEED0, 20, 150), "60 f (seeds 150-159)": (TUNE_FAST_SEED0, 10, FAST_FRAMES)}
+    overrides = overrides or {}
+    sets = ({"150 f (seeds 200-219, held out)": (REPORT_SEED0, 20, 150),
+             "60 f (seeds 300-309, held out)": (FAST_SEED0, 10, FAST_FRAMES)} if held_out else
+            {"150 f (seeds 100-119)": (TUNE_SEED0, 20, 150), "60 f (seeds 150-159)": (TUNE_FAST_SEED0, 10, FAST_FRAMES)})
     runs = []
     with tempfile.TemporaryDirectory(prefix="bench_docking_") as tmp_name:
         for set_name, (seed0, count, frames) in sets.items():
             for seq in docking_sequences(Path(tmp_name), count, frames, seed0):
                 for start, n in DIAGNOSIS_STARTS.items():
                     for s in range(seeds if n is None else n):
-                        out = run_ours(seq, {}, s, start)
+                        out = run_ours(seq, overrides, s, start)
                         auc = score(seq, out)["success_auc"]
                         errors = frame_errors(out["quads"], seq["gt_quads"])
                         runs.append({"set": set_name, "start": start, "scene": seq["name"], "seed": s, "auc": auc,
@@ -481,10 +487,14 @@ def run_diagnosis(seeds: int) -> None:
                       + " ".join(f"{r['auc']:.3f}" for r in runs if r["scene"] == seq["name"] and r["start"] == "box")
                       + f" [{time.time() - started:.0f} s]", flush=True)
     md = diagnosis_markdown(runs, seeds, time.time() - started)
+    if overrides or held_out:
+        md[0] += f" -- {'held-out seeds' if held_out else 'tuning seeds'}, overrides {json.dumps(overrides)}"
     (HERE / "results").mkdir(exist_ok=True)
     table = [{k: v for k, v in r.items() if k != "errors"} for r in runs]
-    (HERE / "results" / "docking_diagnosis.json").write_text(json.dumps({"runs": table}, indent=1))
-    (HERE / "results" / "docking_diagnosis.md").write_text("\n".join(md) + "\n")
+    stem = "docking_diagnosis" + (f"_{tag}" if tag else "")
+    (HERE / "results" / f"{stem}.json").write_text(json.dumps({"overrides": overrides, "held_out": held_out,
+                                                               "runs": table}, indent=1))
+    (HERE / "results" / f"{stem}.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
 
 
@@ -598,6 +608,24 @@ def aggregate(rows: list[dict]) -> dict:
     return row
 
 
+def parse_overrides(items: list[str]) -> dict:
+    """``["key=value", ...]`` -> DockingConfig overrides; a value is read as JSON (numbers, true, lists), else
+    taken as a string; an unknown key is refused here rather than deep in a run."""
+    from aircraft_docking_tracker.docking.tracker import DockingConfig  # noqa: PLC0415
+
+    known = set(DockingConfig.__dataclass_fields__)
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or key not in known:
+            raise SystemExit(f"bench/docking: --set {item!r}: expected KEY=VALUE with KEY a DockingConfig field")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="4 synthetic scenes of 60 frames, 100 real frames")
@@ -612,6 +640,11 @@ def main() -> int:
                         help="only the round-2 held-out comparison (results/docking_candidates.*)")
     parser.add_argument("--diagnose", action="store_true",
                         help="only the loss diagnosis on the tuning seeds (results/docking_diagnosis.*)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="--diagnose: a DockingConfig override (value read as JSON, else a string); repeatable")
+    parser.add_argument("--held-out", action="store_true",
+                        help="--diagnose on the report's approaches (seeds 200-219, 300-309) instead of the tuning ones")
+    parser.add_argument("--tag", default="", help="--diagnose: write results/docking_diagnosis_<tag>.*")
     parser.add_argument("--peer-worker", nargs=2, metavar=("IN", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.peer_worker:
@@ -623,7 +656,7 @@ def main() -> int:
         run_reacquisition(args.scenes or (2 if args.quick else 10), 1 if args.quick else 2)
         return 0
     if args.diagnose:
-        run_diagnosis(args.seeds or (1 if args.quick else 3))
+        run_diagnosis(args.seeds or (1 if args.quick else 3), parse_overrides(args.set), args.held_out, args.tag)
         return 0
     if args.candidates:
         run_candidates(args.scenes or (2 if args.quick else 20), args.seeds or (1 if args.quick else 3),
