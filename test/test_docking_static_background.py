@@ -581,3 +581,30 @@ def test_a_restart_mid_approach_keeps_what_the_stand_background_knows():
     kept = np.median([restart_mid_approach(frames, quads, "keep", s) for s in range(3)], axis=0)
     assert kept[0] >= 0.7 and new[0] <= 0.5
     assert kept[1] > new[1] + 0.15
+
+
+def test_relight_keeps_a_bright_sky_out_of_the_foreground_under_a_fast_light_ramp():
+    """background_relight: the light rises 1.5 % a frame (no pixel saturates), so a sky at 170 grey levels
+    brightens 2.6 levels a frame, more than the background's step (2), the ground (36-108) less: a background that
+    follows the frame as seen lags on the sky only, and one gain and offset cannot explain sky and ground at once
+    (measured: 17 % of the sky is foreground); kept under its own light, the background is the stand itself."""
+    rng = np.random.default_rng(3)
+    empty = stand(rng) * 0.6                                  # ground 36-108
+    empty[:80] = 170.0 - np.arange(80, dtype=np.float32)[:, None] * 70 / 80     # a smooth bright sky band on top
+    box = (120, 140, 60, 30)
+    state = ag.from_box(*box)
+    outcome = {}
+    for relight in (False, True):
+        model = StaticBackground(relight=relight)
+        model.start(with_target(empty, box, value=250.0, rng=np.random.default_rng(4)), state)
+        sky_foreground, trusted = [], []
+        frame_rng = np.random.default_rng(5)
+        for i in range(1, 25):
+            frame = with_target(empty, box, value=250.0, rng=frame_rng, gain=1.0 + 0.015 * i)
+            fg = model.observe(frame, state)
+            trusted.append(fg is not None)
+            if fg is not None:
+                sky_foreground.append(float((fg[: int(70 * model.scale)] > 0.5).mean()))
+        outcome[relight] = (np.mean(trusted[10:]), max(sky_foreground[10:], default=1.0))
+    assert outcome[True][0] == 1.0 and outcome[True][1] < 0.02      # kept under its own light: the sky is still sky
+    assert outcome[False][0] < 1.0 or outcome[False][1] > 0.08       # followed as seen: the sky lags (the contrast)

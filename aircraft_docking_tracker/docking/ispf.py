@@ -246,6 +246,10 @@ class FilterConfig(AppearanceConfig):
                                      "this many times (the running median absorbs an aircraft that stands or grows "
                                      "slowly at the stop; 0: learnt everywhere; measured at 1.3 with extent_still "
                                      "measure: much worse on the tuning seeds, docs/docking_tracker.md)", low=0.0, high=3.0)
+    background_relight: bool = param(False, "static camera: the background is kept under its own light: each frame, "
+                                     "brought back by the gain and offset fitted outside the target, is what it moves "
+                                     "toward (false: toward the frame as seen, so under a light that drifts faster than "
+                                     "background_step the bright sky lags and merges with the aircraft)")
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -348,7 +352,8 @@ class AffineParticleFilter:
                                            flicker_gain=config.flicker_gain, motion=config.motion_gain > 0,
                                            max_stale=config.max_stale, stale_window=config.stale_window,
                                            keep_first=config.start_refit + 1 if config.start_refit else 0,
-                                           row_offset=config.background_rows, freeze=config.background_freeze)
+                                           row_offset=config.background_rows, freeze=config.background_freeze,
+                                           relight=config.background_relight)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
