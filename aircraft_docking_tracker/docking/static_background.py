@@ -21,13 +21,15 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   then box-blurred 5x5 (rain streaks are thin; zeroing first keeps the unknown region's difference
   from leaking a ring of foreground round it), then ``clip((d - median - k σ) / (k σ), 0, 1)`` with the median and
   ``σ = 1.4826 MAD`` of ``d`` outside the target (the frame's own noise level).
-* **Relight** (``relight``, ``background_relight`` in ``ispf.py``, off): ``B`` is kept under its own light: it
-  moves toward ``(I - c) / a``, the frame brought back by this frame's fitted gain and offset, instead of toward
-  ``I``. Stepping toward ``I`` itself, ``B`` follows a light that changes more than ``step`` levels a frame only on
-  the dark pixels: the bright sky lags, and no one gain explains sky and ground at once. At the true state on
-  tuning scenes 150-159 (60 frames: the light's period is 36-90 frames) the silhouette's width came out +0.35 in
-  log (median of the last two thirds) with ``B`` following the frame, +0.05 kept under its light; on the
-  150-frame scenes (a slower light) +0.05-0.12 either way.
+* **Relight** (``relight``, ``background_relight`` in ``ispf.py``, off): on a still camera's frame ``B`` first
+  takes the frame's light, ``B <- a B + c`` with the gain and offset fitted above, then steps toward the frame
+  by at most ``step``. Stepping toward ``I`` alone, ``B`` follows a light that changes more than ``step`` levels
+  a frame only on the dark pixels: the bright sky lags, and no one gain explains sky and ground at once. At the
+  true state on tuning scenes 150, 153 (clear, 60 frames: the light's period is 36-90 frames) the silhouette's
+  width came out +0.35 and +0.18 in log (median over the last two thirds) with ``B`` following the frame, +0.05
+  relit. (``B`` stays under the frame's light, so a fit biased on one frame, by rain streaks say, is undone by
+  the next frame's fit; keeping ``B`` under a reference light instead, ``B <- (I - c) / a``, let such a bias
+  accumulate: tuning scene 101 in rain, gain 0.45 and offset +139 after 140 frames.)
 * **Rows' offsets** (``row_offset``, ``background_rows`` in ``ispf.py``): on a trusted frame the silhouette
   is thresholded (same threshold) after each image row's median of ``I - (a B + c)`` over its pixels outside
   the target is removed (:func:`row_offsets`; a row with fewer than ``row_min`` such pixels, or whose
@@ -167,7 +169,6 @@ class StaticBackground:
                  freeze: float = 0.0, relight: bool = False):
         self.keep_first = keep_first
         self.relight = relight
-        self.light = (1.0, 0.0)                     # this frame's gain a and offset c (a B + c)
         self.freeze = freeze
         self.first: list[np.ndarray] = []           # the first keep_first frames at the level (start_silhouette)
         self.measure_motion = motion
@@ -206,7 +207,6 @@ class StaticBackground:
         self.flicker = np.zeros(image.shape, np.float32) if self.flicker_gain > 0 else None
         self.still_run = self.still_frames + 1         # a stand camera: still until a frame says otherwise
         self._stale, self.camera_moving = [], False
-        self.light = (1.0, 0.0)
         self._drop_track(image)
 
     def _drop_track(self, image: np.ndarray) -> None:
@@ -242,11 +242,12 @@ class StaticBackground:
             return None
         outside = state_mask(state, self.guard, image.shape, self.scale) == 0
         self.foreground, self.trusted, self.motion = None, False, None
-        shift = np.inf
+        shift, lit = np.inf, None
         if outside.sum() >= 100:             # else too little background to measure anything
             shift = self.camera_shift(image, outside)
-            self.light = _light_fit(self.background, image, outside, self.light)
-            signed = image - (self.light[0] * self.background + self.light[1])
+            gain, offset = _light_fit(self.background, image, outside)
+            lit = gain * self.background + offset
+            signed = image - lit
             difference = np.abs(signed)
             self.camera_moving = self._stale_background(difference, image, outside)
         self.still_run = self.still_run + 1 if shift <= self.motion_max_shift else 0
@@ -269,6 +270,8 @@ class StaticBackground:
             self.foreground = fg * self.known if self.trusted else None
         if len(self.first) < self.keep_first:
             self.first.append(image)
+        if self.relight and lit is not None and shift <= self.max_shift and not self.camera_moving:
+            self.background = lit               # B takes this frame's light at once (still camera), the scene by step
         frozen = None           # freeze: only on a still camera (after a pan, B inside the region must be relearnt)
         if self.freeze > 0 and shift <= self.max_shift and not self.camera_moving:
             frozen = state_mask(state, self.freeze, image.shape, self.scale) > 0
@@ -302,14 +305,10 @@ class StaticBackground:
         still = change < max(self.still_level, 3.0 * noise)
         self._still = np.where(still, np.minimum(self._still + 1, self.still_frames), 0)
         learnt = ~self.known & (self._still >= self.still_frames)
-        target = image
-        if self.relight:                        # B stays under its own light: the frame brought back to it
-            gain, offset = self.light
-            target = (image - offset) / gain
-        self.background[learnt] = target[learnt]
+        self.background[learnt] = image[learnt]
         self.known |= learnt
         moving = self.known if frozen is None else self.known & ~frozen
-        self.background += np.where(moving, np.clip(target - self.background, -self.step, self.step), 0)
+        self.background += np.where(moving, np.clip(image - self.background, -self.step, self.step), 0)
         self._previous = image
 
     def camera_shift(self, image: np.ndarray, outside: np.ndarray | None = None) -> float:
@@ -325,15 +324,14 @@ class StaticBackground:
         return float(np.hypot(dx, dy))
 
 
-def _light_fit(background: np.ndarray, image: np.ndarray, outside: np.ndarray,
-               last: tuple[float, float] = (1.0, 0.0)) -> tuple[float, float]:
+def _light_fit(background: np.ndarray, image: np.ndarray, outside: np.ndarray) -> tuple[float, float]:
     """``(a, c)`` of ``a B + c``, the background under the image's light: gain and offset fitted by least squares
-    on every 7th pixel outside the target; ``last`` when the fit is degenerate (a flat background) or its gain
-    is not a light change (outside 0.25-4)."""
+    on every 7th pixel outside the target; no change, ``(1, 0)``, when the fit is degenerate (a flat background)
+    or its gain is not a light change (outside 0.25-4)."""
     b, i = background[outside][::7], image[outside][::7]
     (gain, offset), *_ = np.linalg.lstsq(np.stack([b, np.ones_like(b)], 1), i, rcond=None)
     if not (np.isfinite(gain) and np.isfinite(offset) and 0.25 < gain < 4.0):
-        return last
+        return 1.0, 0.0
     return float(gain), float(offset)
 
 
