@@ -608,3 +608,37 @@ def test_relight_keeps_a_bright_sky_out_of_the_foreground_under_a_fast_light_ram
         outcome[relight] = (np.mean(trusted[10:]), max(sky_foreground[10:], default=1.0))
     assert outcome[True][0] == 1.0 and outcome[True][1] < 0.02      # kept under its own light: the sky is still sky
     assert outcome[False][0] < 1.0 or outcome[False][1] > 0.08       # followed as seen: the sky lags (the contrast)
+
+
+def test_two_frame_foreground_drops_one_frame_streaks_and_keeps_the_moving_target():
+    """foreground_frames 2: bright streaks that fall anew each frame (rain) are foreground on one frame only; the
+    minimum of two trusted frames' foregrounds drops them and keeps a target that moves 4 px a frame."""
+    rng = np.random.default_rng(6)
+    empty = stand(rng)
+    outcome = {}
+    for persist in (1, 2):
+        model = StaticBackground(persist=persist)
+        frame_rng = np.random.default_rng(7)
+        box = (40, 80, 60, 30)
+        model.start(with_target(empty, box, rng=frame_rng), ag.from_box(*box))
+        streaks, target = [], []
+        for i in range(1, 30):
+            box = (40 + 4 * i, 80, 60, 30)
+            frame = with_target(empty, box, rng=frame_rng).astype(np.float32)
+            for x, y in zip(frame_rng.integers(0, 314, 60), frame_rng.integers(0, 226, 60)):
+                frame[y:y + 12, x:x + 2] = 235.0              # 60 streaks of 2 x 12 px, new every frame
+            fg = model.observe(frame.astype(np.uint8), ag.from_box(40 + 4 * (i - 1), 80, 60, 30))
+            if fg is None or i < 10:
+                continue
+            s = model.scale
+            x, y, w, h = (int(round(v * s)) for v in box)
+            inner = np.zeros(fg.shape, bool)
+            inner[y + 2:y + h - 2, x + 3:x + w - 2] = True       # the target less its leading and trailing edges
+            away = np.ones(fg.shape, bool)                  # not the target's path (its trail fades only
+            away[max(y - 6, 0):y + h + 6] = False             # background_step levels a frame)
+            target.append(float((fg[inner] > 0.5).mean()))
+            streaks.append(float((fg[away] > 0.5).mean()))
+        outcome[persist] = (len(target), np.median(target), np.median(streaks))
+    assert outcome[2][0] >= 15 and outcome[2][1] > 0.9              # the target stays foreground
+    assert outcome[2][2] < 0.5 * outcome[1][2]                      # most streaks are gone (measured: 0.024 vs 0.083)
+    assert outcome[1][2] > 0.04                                     # (the contrast: one frame keeps them)

@@ -250,6 +250,9 @@ class FilterConfig(AppearanceConfig):
                                      "brought back by the gain and offset fitted outside the target, is what it moves "
                                      "toward (false: toward the frame as seen, so under a light that drifts faster than "
                                      "background_step the bright sky lags and merges with the aircraft)")
+    foreground_frames: int = param(1, "static camera: the foreground is the minimum over this many trusted frames in "
+                                   "a row (rain streaks and the bands of a clipping colour channel under a changing "
+                                   "light last one frame, the aircraft stays; 1: this frame's alone)", low=1, high=5)
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -353,7 +356,7 @@ class AffineParticleFilter:
                                            max_stale=config.max_stale, stale_window=config.stale_window,
                                            keep_first=config.start_refit + 1 if config.start_refit else 0,
                                            row_offset=config.background_rows, freeze=config.background_freeze,
-                                           relight=config.background_relight)
+                                           relight=config.background_relight, persist=config.foreground_frames)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
