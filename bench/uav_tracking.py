@@ -40,19 +40,20 @@ sys.path.insert(0, str(REPO))
 
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
-from aircraft_docking_tracker.evaluation.evaluate import EvaluateConfig, score_mot  # noqa: E402
+from aircraft_docking_tracker.evaluation.evaluate import EvaluateConfig, hidden_rows, score_mot  # noqa: E402
 from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
 from aircraft_docking_tracker.object_table import confident_rows, low_confidence, table_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
-from multi_target_tracker.association import clip_to_frame  # noqa: E402
+from multi_target_tracker.association import CONFIRMED, TENTATIVE, clip_to_frame  # noqa: E402
 from multi_target_tracker.association_node import tracks_to_table  # noqa: E402
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
 
 SETUP = package_config_dir() / "uav_camera.yaml"
 DEMO_SEED = 106
 CACHE = REPO / "out" / "uav_tracking_cache"
+ORACLE = " oracle boxes"
 WIDE_BAND = 4.0   # low_confidence_band the detector runs with when a variant asks for a narrower one
 SEEDS = {"tuning": [(UAV_TUNING_SEEDS.start + k, 1) for k in range(6)] + [(UAV_TUNING_SEEDS.start + 100 + k, 2)
                                                                            for k in range(2)],
@@ -65,6 +66,16 @@ FULLY_VISIBLE = 0.7
 # misses (any class) with, in that frame: a track of any state (tentative, unpublished coasting too) on the
 # vehicle at IoU >= 0.5; a published track whose box, clipped to the frame, is on it at IoU >= 0.5
 NEAR_CLASSES = ("a track of any state on it", "a published track on it once clipped to the frame")
+# misses by what the pipeline had on the vehicle in that frame, each in the first class that fits ("on it": IoU >= 0.5;
+# groups: the detector's groups down to WIDE_BAND below its verifier threshold, rejected ones included)
+CAUSES = ("track on it, tentative (not confirmed yet)", "track on it, coasting unpublished",
+          "track on it, published but matched elsewhere", "detection on it, no track",
+          "group on it rejected by the verifier", "mislocalised: only a detection at IoU 0.1-0.5",
+          "mislocalised: only a rejected group at IoU 0.1-0.5", "no group at all")
+# false positives (published tracks matched to no counted vehicle) by where they lie
+FP_CAUSES = ("mislocalised on a counted vehicle (IoU 0.1-0.5), confirmed",
+             "mislocalised on a counted vehicle (IoU 0.1-0.5), coasting", "on a hidden vehicle (IoU >= 0.1)",
+             "elsewhere")
 
 
 
@@ -101,6 +112,31 @@ def detections(name: str, detector_overrides: dict, seed: int, difficulty: int, 
     return tables
 
 
+def rejected_too(detector_overrides: dict, seed: int, difficulty: int, images, tables) -> list[np.ndarray]:
+    """The detections with the groups the verifier rejected down to :data:`WIDE_BAND` below its threshold, flagged
+    ``low_confidence`` (what :func:`miss_cause` reads); ``tables`` itself for a set-up without a band (no extra run)."""
+    band = detector_overrides.get("low_confidence_band", load_yaml_parameters(SETUP, "detector").get(
+        "low_confidence_band", 0.0))
+    if band <= 0:
+        return tables
+    return detections("uav", {**detector_overrides, "low_confidence_band": WIDE_BAND}, seed, difficulty, images)
+
+
+def oracle_boxes(truth, tables, floor: float) -> list[np.ndarray]:
+    """The detections (flagged groups too) lying on a counted vehicle at IoU ``floor``-0.5 moved onto its box: the MOTA
+    a perfect box regressor of the same groups would give (``--oracle-boxes``; a bound, never a set-up)."""
+    out = []
+    for t, table in zip(truth, tables):
+        table, counted = table.copy(), t[~hidden_rows(t, EvaluateConfig())]
+        if len(table) and len(counted):
+            iou = box_iou(table_boxes(table)[:, None], table_boxes(counted)[None])
+            fix = (iou.max(axis=1) >= floor) & (iou.max(axis=1) < 0.5)
+            for field in ("x", "y", "w", "h"):
+                table[field][fix] = counted[field][iou.argmax(axis=1)[fix]]
+        out.append(table)
+    return out
+
+
 def track(stamps, tables, association_overrides: dict) -> list[np.ndarray]:
     """Every frame's tracks (all states, ``TRACK_DTYPE``) from the association core with the set-up's parameters."""
     tracker = build_processor("association", SETUP, association_overrides).tracker
@@ -111,23 +147,70 @@ def track(stamps, tables, association_overrides: dict) -> list[np.ndarray]:
     return out
 
 
-def breakdown(truth, tables, tracks, size=(640, 480)) -> dict:
-    """MOTA as the demo scores it and its terms, the misses split by :data:`MISS_CLASSES`."""
+def _best_iou(boxes: np.ndarray, box: np.ndarray) -> np.ndarray:
+    return box_iou(boxes, box) if len(boxes) else np.zeros(0)
+
+
+def miss_cause(box: np.ndarray, tracks: np.ndarray, groups: np.ndarray, published_states) -> str:
+    """The :data:`CAUSES` class of a missed vehicle (``box`` (1, 4)) from that frame's tracks (every state) and
+    ``groups`` (the detections with the rejected groups flagged ``low_confidence``), the first that fits."""
+    on_track = _best_iou(table_boxes(tracks), box)
+    if len(on_track) and on_track.max() >= 0.5:
+        state = int(tracks["state"][on_track.argmax()])
+        return CAUSES[0] if state == TENTATIVE else CAUSES[2] if state in published_states else CAUSES[1]
+    iou, rejected = _best_iou(table_boxes(groups), box), low_confidence(groups)
+    for cause, rows, floor in ((CAUSES[3], ~rejected, 0.5), (CAUSES[4], rejected, 0.5), (CAUSES[5], ~rejected, 0.1),
+                               (CAUSES[6], rejected, 0.1)):
+        if (iou[rows] >= floor).any():
+            return cause
+    return CAUSES[7]
+
+
+def false_positive_causes(truth: np.ndarray, tracks: np.ndarray, matched: set, cfg: EvaluateConfig) -> dict:
+    """:data:`FP_CAUSES` counts of one frame: published tracks not in ``matched`` (ids matched this frame), less
+    those ``score_mot`` drops as sitting on a hidden vehicle (its rule: IoU >= the threshold, above any counted)."""
+    out = dict.fromkeys(FP_CAUSES, 0)
+    hyp = tracks[np.isin(tracks["state"], cfg.states())]
+    hidden = hidden_rows(truth, cfg)
+    for row in hyp[~np.isin(hyp["id"], list(matched))]:
+        box = table_boxes(row[None])
+        counted = _best_iou(table_boxes(truth[~hidden]), box).max(initial=0.0)
+        on_hidden = _best_iou(table_boxes(truth[hidden]), box).max(initial=0.0)
+        if on_hidden >= cfg.iou_threshold and on_hidden > counted:
+            continue
+        out[FP_CAUSES[0 if row["state"] == CONFIRMED else 1] if counted >= 0.1 else
+            FP_CAUSES[2] if on_hidden >= 0.1 else FP_CAUSES[3]] += 1
+    return out
+
+
+def breakdown(truth, tables, tracks, size=(640, 480), groups=None) -> dict:
+    """MOTA as the demo scores it and its terms, the misses split by :data:`MISS_CLASSES` and :data:`CAUSES`
+    (``groups``: each frame's detections with the rejected groups flagged; default ``tables``), the false positives
+    by :data:`FP_CAUSES`."""
     cfg = EvaluateConfig()
+    groups = tables if groups is None else groups
     gt = {k: t for k, t in enumerate(truth)}
     mot = score_mot(gt, {k: t for k, t in enumerate(tracks)}, cfg)
     misses = dict.fromkeys(MISS_CLASSES, 0)
+    causes = dict.fromkeys(CAUSES, 0)
     near = dict.fromkeys(NEAR_CLASSES, 0)
+    after_first_match = 0
+    matched: dict[int, set] = {}
     rows = {}
     for k, t in enumerate(truth):
         for i, row in enumerate(t):
             rows[(k + 1, int(row["id"]))] = (k, i)
     for gt_id, events in mot["timeline"].items():
+        seen = False
         for frame, hyp in events:
             if hyp is not None:
+                seen = True
+                matched.setdefault(frame - 1, set()).add(hyp)
                 continue
+            after_first_match += seen
             k, i = rows[(frame, int(gt_id))]
             box = table_boxes(truth[k][i:i + 1])
+            causes[miss_cause(box, tracks[k], groups[k], cfg.states())] += 1
             dets = table_boxes(confident_rows(tables[k]))
             everything = table_boxes(tracks[k])
             published = table_boxes(tracks[k][np.isin(tracks[k]["state"], cfg.states())])
@@ -141,10 +224,17 @@ def breakdown(truth, tables, tracks, size=(640, 480)) -> dict:
                 misses[MISS_CLASSES[2]] += 1
             else:
                 misses[MISS_CLASSES[3]] += 1
+    fps = dict.fromkeys(FP_CAUSES, 0)
+    for k, t in enumerate(truth):
+        for c, v in false_positive_causes(t, tracks[k], matched.get(k, set()), cfg).items():
+            fps[c] += v
+    if sum(fps.values()) != mot["num_false_positives"]:     # the split must add up to the metric's own count
+        raise AssertionError(f"false positives {mot['num_false_positives']}, split {fps}")
     n = max(mot["num_objects"], 1)
     return {"mota": mot["mota"], "idf1": mot["idf1"], "counted": mot["num_objects"], "misses": mot["num_misses"],
             "false_positives": mot["num_false_positives"], "id_switches": mot["num_switches"],
-            "miss_causes": misses, "misses_near": near,
+            "miss_causes": misses, "misses_near": near, "miss_detail": causes, "fp_causes": fps,
+            "misses_after_first_match": after_first_match,
             "mota_points": {"misses": mot["num_misses"] / n, "false positives": mot["num_false_positives"] / n,
                             "identity switches": mot["num_switches"] / n,
                             **{c: v / n for c, v in misses.items()}}}
@@ -167,19 +257,22 @@ def pooled(per_seed: list[dict]) -> dict:
     terms = {k: sum(r[k] for r in per_seed) for k in ("misses", "false_positives", "id_switches")}
     causes = {c: sum(r["miss_causes"][c] for r in per_seed) for c in MISS_CLASSES}
     near = {c: sum(r["misses_near"][c] for r in per_seed) for c in NEAR_CLASSES}
+    detail = {c: sum(r["miss_detail"][c] for r in per_seed) for c in CAUSES}
+    fps = {c: sum(r["fp_causes"][c] for r in per_seed) for c in FP_CAUSES}
     mota = [r["mota"] for r in per_seed]
     tp, gt_boxes, fp, found = (sum(r["detector"][k] for r in per_seed)
                                for k in ("true_positives", "ground_truth", "false_positives", "detections"))
     return {"mota_pooled": 1.0 - sum(terms.values()) / max(counted, 1), "mota_mean": float(np.mean(mota)),
             "mota_worst": float(np.min(mota)), "counted": counted, **terms, "miss_causes": causes,
-            "misses_near": near,
+            "misses_near": near, "miss_detail": detail, "fp_causes": fps,
+            "misses_after_first_match": sum(r["misses_after_first_match"] for r in per_seed),
             "detector": {"detection_rate": tp / max(gt_boxes, 1), "false_alarm_rate": fp / max(found, 1),
                          "seed_detection_mean": float(np.mean([r["detector"]["detection_rate"] for r in per_seed])),
                          "seed_detection_worst": float(np.min([r["detector"]["detection_rate"] for r in per_seed])),
                          "seed_false_alarms_mean": float(np.mean([r["detector"]["false_alarm_rate"] for r in per_seed])),
                          "seed_false_alarms_worst": float(np.max([r["detector"]["false_alarm_rate"] for r in per_seed]))},
             "mota_points": {**{k: v / max(counted, 1) for k, v in terms.items()},
-                            **{c: v / max(counted, 1) for c, v in causes.items()}}}
+                            **{c: v / max(counted, 1) for c, v in {**causes, **detail, **fps}.items()}}}
 
 
 def parse_variants(specs: list[str]) -> dict:
@@ -218,6 +311,17 @@ def markdown(results: dict) -> str:
                       f"{r['pooled']['detector']['seed_false_alarms_mean']:.3f}, worst "
                       f"{r['pooled']['detector']['seed_detection_worst']:.3f} / "
                       f"{r['pooled']['detector']['seed_false_alarms_worst']:.3f})" for name, r in variants.items())]
+        lines += ["", "Misses by what the pipeline had on the vehicle (first that fits; MOTA points), and false "
+                  "positives by where they lie:", "",
+                  "| variant | " + " | ".join(CAUSES) + " | misses after the vehicle's first match | "
+                  + " | ".join(f"false pos.: {c}" for c in FP_CAUSES) + " |",
+                  "|---" * (2 + len(CAUSES) + len(FP_CAUSES)) + "|"]
+        for name, r in variants.items():
+            p = r["pooled"]
+            lines.append(f"| {name} | " + " | ".join(f"{p['miss_detail'][c]} ({p['mota_points'][c]:.3f})"
+                                                    for c in CAUSES)
+                         + f" | {p['misses_after_first_match']} | "
+                         + " | ".join(f"{p['fp_causes'][c]} ({p['mota_points'][c]:.3f})" for c in FP_CAUSES) + " |")
         lines += ["", "Misses with, in that frame: " + "; ".join(
             f"{name}: " + ", ".join(f"{c} {r['pooled']['misses_near'][c]}" for c in NEAR_CLASSES)
             for name, r in variants.items())]
@@ -232,20 +336,27 @@ def main() -> int:
     parser.add_argument("--set", action="append", default=[], metavar="NAME=node.key:json,...",
                         help="a variant beside the set-up: detector.* / association.* parameter overrides")
     parser.add_argument("--out", default=str(HERE / "results" / "uav_tracking"), help="results path without suffix")
+    parser.add_argument("--oracle-boxes", type=float, default=0.0, metavar="IOU",
+                        help="also score each variant with its detections at IoU IOU-0.5 on a counted vehicle moved "
+                        "onto its box (a bound for the box regressor; variant name + ' oracle boxes')")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     variants = parse_variants(args.set)
+    runs = {**variants, **({name + ORACLE: v for name, v in variants.items()} if args.oracle_boxes > 0 else {})}
     seeds = "demo" if args.quick else args.seeds
     groups = list(SEEDS) if seeds == "all" else [seeds]
     results = {"setup": SETUP.name, "variants": {k: {"detector": d, "association": a} for k, (d, a) in variants.items()},
                "groups": {}}
     for group in groups:
-        results["groups"][group] = {name: {"seeds": []} for name in variants}
+        results["groups"][group] = {name: {"seeds": []} for name in runs}
         for seed, difficulty in SEEDS[group]:
             stamps, images, truth = scene(seed, difficulty)
-            for name, (det, assoc) in variants.items():
+            for name, (det, assoc) in runs.items():
                 tables = detections("uav", det, seed, difficulty, images)
-                r = breakdown(truth, tables, track(stamps, tables, assoc))
+                groups = rejected_too(det, seed, difficulty, images, tables)
+                if name.endswith(ORACLE):
+                    tables, groups = (oracle_boxes(truth, t, args.oracle_boxes) for t in (tables, groups))
+                r = breakdown(truth, tables, track(stamps, tables, assoc), groups=groups)
                 d = detector_counts(truth, tables).summary()
                 r["detector"] = {k: d[k] for k in ("detection_rate", "false_alarm_rate", "true_positives",
                                                    "ground_truth", "false_positives", "detections")}
@@ -254,7 +365,7 @@ def main() -> int:
                 print(f"{group} seed {seed} {name}: MOTA {r['mota']:.3f} (misses {r['misses']}, false positives "
                       f"{r['false_positives']}, switches {r['id_switches']} of {r['counted']}) {r['miss_causes']}",
                       flush=True)
-        for name in variants:
+        for name in runs:
             results["groups"][group][name]["pooled"] = pooled(results["groups"][group][name]["seeds"])
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

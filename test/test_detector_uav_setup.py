@@ -162,3 +162,20 @@ def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_uncha
 def test_low_confidence_band_needs_a_verifier():
     with pytest.raises(ConfigError):
         validate(DetectorConfig(low_confidence_band=1.0))
+
+
+def test_training_tools_build_the_setups_cascade_alone():
+    """tools/train_uav_verifier.py and train_uav_box_regressor.py scan with the set-up's cascade without its verifier
+    (``cascade_detector``); the set-up's ``low_confidence_band`` needs a verifier, so the band is dropped with it
+    (session 11's band broke both tools: ConfigError before any scan)."""
+    import sys
+    tools = str(package_config_dir().parent / "tools")
+    sys.path.insert(0, tools)
+    try:
+        from train_uav_verifier import cascade_detector
+    finally:
+        sys.path.remove(tools)
+    assert load_yaml_parameters(SETUP, "detector")["low_confidence_band"] > 0
+    det = cascade_detector({"box_scale": 1.0})
+    assert det.verifier is None and det.box_regressor is None and det.config.low_confidence_band == 0
+    assert det.config.border == load_yaml_parameters(SETUP, "detector")["border"]

@@ -60,7 +60,8 @@ def scene_frames(seed: int, difficulty: int, every: int):
 
 def cascade_detector(overrides: dict | None = None) -> Detector:
     detector = build_processor("detector", package_config_dir() / SETUP,
-                               {"verifier": "", "box_regressor": "", **(overrides or {})}).detector
+                               {"verifier": "", "box_regressor": "", "low_confidence_band": 0.0,
+                                **(overrides or {})}).detector
     if detector is None:
         raise SystemExit(f"{SETUP}: the detector cannot be built")
     return detector
