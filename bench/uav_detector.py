@@ -62,7 +62,9 @@ from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
 from aircraft_docking_tracker.object_table import confident_rows  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
-    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
+    UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_UPRIGHT as UPRIGHT,
+    UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
+    UavSceneConfig, detection_truth)
 from multi_target_tracker.detector import Detector, DetectorConfig, group_stats, suppress_contained  # noqa: E402
 from multi_target_tracker.verifier import features  # noqa: E402
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
@@ -78,15 +80,6 @@ FORMER = {"model": "uav_vehicles_fused.json", "window_margin": 1.5, "min_neighbo
 PREVIOUS = {"verifier": "", "box_regressor": "", "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
             "stride": 8, "min_neighbors": 8, "window_margin": 1.0, "group_iou": 0.3, "containment": 0.4,
             "box_scale": 0.9}
-# the set-up before the colour verifier: the cascade's window count alone, its operating point (tuning seeds)
-CASCADE_ONLY = {"verifier": "", "box_regressor": "", "min_neighbors": 8, "containment": 0.4, "box_scale": 0.9}
-# the set-up before the box regressor (session 8): the verifier on the groups' mean boxes, its operating point
-VERIFIER_ONLY = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217, "box_regressor": "",
-                 "min_neighbors": 3, "containment": 0.4, "box_scale": 0.9}
-# the set-up before the tree verifier (session 9): the logistic verifier, with the box regressor
-LOGISTIC = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217}
-UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
-           "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 HEIGHTS = (1.0, 2.0, 2.5, 3.0, 4.0)
 TARGET_DETECTION, TARGET_FALSE_ALARMS, TARGET_FPS = 0.85, 0.15, 10.0
 MIN_SEED_BOXES = 10     # a seed enters mean / worst with at least this many counted vehicles

@@ -16,8 +16,9 @@ from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccum
 from aircraft_docking_tracker.object_table import LOW_CONFIDENCE, confident_rows
 from aircraft_docking_tracker.offline import build_processor
 from aircraft_docking_tracker.scenarios.uav import (
-    UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig,
-    detection_truth)
+    UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_UPRIGHT as UPRIGHT,
+    UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS,
+    UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
 from multi_target_tracker.cascade import Cascade
 from multi_target_tracker.detector import Detector, DetectorConfig, resolve_model
 
@@ -27,16 +28,6 @@ SETUP = package_config_dir() / "uav_camera.yaml"
 # the set-up measured 0.49 / 0.38 at every 4th frame, the upright model 0.33 / 0.74): still below issue 12's
 # 0.85 / 0.15; these bounds keep a margin under what the four seeds below measure
 MIN_DETECTION, MAX_FALSE_ALARMS = 0.35, 0.35
-# the previous set-up (upright 3:2 windows, vehicles at any heading in them; bench/uav_detector.py UPRIGHT)
-# the same cascade without the colour verifier (the set-up before it; bench/uav_detector.py CASCADE_ONLY)
-CASCADE_ONLY = {"verifier": "", "box_regressor": "", "min_neighbors": 8, "containment": 0.4, "box_scale": 0.9}
-# the set-up before the box regressor (the verifier on the mean boxes; bench/uav_detector.py VERIFIER_ONLY)
-VERIFIER_ONLY = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217, "box_regressor": "",
-                 "min_neighbors": 3, "containment": 0.4, "box_scale": 0.9}
-# the set-up before the tree verifier (session 9: the logistic verifier on the mean boxes, with the regressor)
-LOGISTIC = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217}
-UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
-           "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}
 
 
 @pytest.fixture(scope="module")
