@@ -106,6 +106,13 @@ class DockingConfig(FilterConfig):
                                    "with it, 95 %, 0.653 without)")
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
+    override_restart: str = param("detection", "what the override restarts on: detection = the detection's box "
+                                  "(axis-aligned, the cascade's looser box); shape = when the detection agrees with "
+                                  "the track on the centre (each box holds the other's centre), the track's state "
+                                  "moved to the detection's centre and scaled so that its axis-aligned box has the "
+                                  "detection's area (the track's rotation, aspect and skew kept: a track whose size "
+                                  "or place went wrong is mended without losing its shape); a detection away from the "
+                                  "centre restarts on its box", choices=("detection", "shape"))
 
     def validate(self) -> None:
         """The cross-field checks ``config.validate`` calls: the filter's, and initial_box is empty or
@@ -222,7 +229,7 @@ class DockingTracker:
         if self.state == TRACKING and self.config.override_after > 0:
             box = self._detected_away(detections)
             if box is not None:
-                return self.start(frame, box, detected=True)
+                return self.start(frame, self._override_state(box), detected=True)
         r = self.filter.step(frame)
         low = self._low_frame(r)
         self._low = self._low + 1 if low else 0
@@ -263,6 +270,24 @@ class DockingTracker:
             return None
         self._away, self._away_box = _run_at(self._away, self._away_box, best), best
         return best if self._away >= cfg.override_after else None
+
+    def _override_state(self, box: np.ndarray):
+        """Where the override restarts (``override_restart``): the detection's box, or with ``shape`` and a
+        detection that agrees with the track on the centre, the track's shape at the detection's place and size."""
+        track = self.filter.estimate
+        if self.config.override_restart == "shape" and centres_agree(box[None], ag.to_box(track))[0]:
+            return shaped_restart(track, box)
+        return box
+
+
+def shaped_restart(track: np.ndarray, box) -> np.ndarray:
+    """``override_restart`` shape: the state ``track`` (3x3) moved to the centre of ``box`` (x, y, w, h) and scaled
+    about it so that its axis-aligned box has the area of ``box``; rotation, aspect and skew are the track's."""
+    box = np.asarray(box, dtype=float)
+    p, own = ag.to_params(track), ag.to_box(track)
+    p[:2] = box[:2] + box[2:] / 2
+    p[2] *= np.sqrt(box[2] * box[3] / (own[2] * own[3]))
+    return ag.from_params(p)
 
 
 def _run_at(count: int, last: np.ndarray | None, box: np.ndarray) -> int:
