@@ -253,11 +253,11 @@ def test_a_detection_that_agrees_on_the_centre_restarts_nothing_with_keep_agreei
         assert restarts(large, state, False)
 
 
-def test_override_restart_shape_keeps_the_tracks_shape_at_an_agreeing_detections_place_and_size():
-    """override_restart shape: a detection that agrees with the track on the centre but is 1.6x its size (IoU
-    0.39, under override_iou 0.5) restarts the track with the detection's centre and the area of its box, and the
-    track's rotation (25 deg) and aspect (1.8); the default restarts on the axis-aligned detection box (rotation 0,
-    the box's aspect). A detection away from the track restarts on its box either way."""
+def test_override_agreeing_keeps_or_reshapes_on_a_detection_that_agrees_on_the_centre():
+    """override_agreeing: a detection that agrees with the track on the centre but is 1.6x its size (IoU 0.39, under
+    override_iou 0.5). restart (the default) restarts on the axis-aligned detection box (rotation 0, the box's
+    aspect); keep does not restart; shape restarts with the detection's centre and the area of its box, and the
+    track's rotation (25 deg) and aspect (1.8). A detection away from the track restarts on its box in all three."""
     frame, _ = next(moving_target_scene(1))
     track = ag.from_params([150, 110, 30, 1.8, np.deg2rad(25), 0.0])
     x, y, w, h = ag.to_box(track)
@@ -265,20 +265,21 @@ def test_override_restart_shape_keeps_the_tracks_shape_at_an_agreeing_detections
     elsewhere = (x + 3 * w, y + 2 * h, w, h)
 
     def restart(box, how):
-        tracker = DockingTracker(DockingConfig(override_after=2, override_iou=0.5, override_restart=how, seed=0))
+        tracker = DockingTracker(DockingConfig(override_after=2, override_iou=0.5, override_agreeing=how, seed=0))
         tracker.start(frame, track)
         tracker.filter.step = lambda f: FrameResult(track, 0.9, 20, False, track[None])
         started = [r for r in (tracker.step(frame, detections((*box, 0.9, 1))) for _ in range(3)) if r.started]
-        assert len(started) == 1
-        return ag.to_params(started[0].matrix), ag.to_box(started[0].matrix)
+        assert len(started) <= 1
+        return (ag.to_params(started[0].matrix), ag.to_box(started[0].matrix)) if started else None
 
     params, box = restart(large, "shape")
     assert np.allclose(params[:2], [large[0] + large[2] / 2, large[1] + large[3] / 2])
     assert np.allclose(params[3:5], [1.8, np.deg2rad(25)])
     assert box[2] * box[3] == pytest.approx(large[2] * large[3], rel=1e-6)
-    params, _ = restart(large, "detection")
+    params, _ = restart(large, "restart")
     assert abs(params[4]) < 1e-9 and params[3] == pytest.approx(large[2] / large[3])
-    for how in ("shape", "detection"):
+    assert restart(large, "keep") is None
+    for how in ("restart", "keep", "shape"):
         assert np.allclose(restart(elsewhere, how)[1], elsewhere)
 
 

@@ -106,13 +106,14 @@ class DockingConfig(FilterConfig):
                                    "with it, 95 %, 0.653 without)")
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
-    override_restart: str = param("detection", "what the override restarts on: detection = the detection's box "
-                                  "(axis-aligned, the cascade's looser box); shape = when the detection agrees with "
-                                  "the track on the centre (each box holds the other's centre), the track's state "
-                                  "moved to the detection's centre and scaled so that its axis-aligned box has the "
-                                  "detection's area (the track's rotation, aspect and skew kept: a track whose size "
-                                  "or place went wrong is mended without losing its shape); a detection away from the "
-                                  "centre restarts on its box", choices=("detection", "shape"))
+    override_agreeing: str = param("restart", "the override and a detection that agrees with the track on the centre "
+                                   "(each box holds the other's centre) but overlaps it by less than override_iou: "
+                                   "restart = it is away, the restart is on its box (the cascade's axis-aligned box); "
+                                   "keep = it is on the track, it does not count (keep_agreeing does this for the "
+                                   "re-acquisition of a lost track too); shape = it is away, the restart keeps the "
+                                   "track's rotation, aspect and skew at the detection's centre and area (measured: the "
+                                   "cascade's box of a tracked aircraft is often a part of it, 0.2-0.35 log smaller, "
+                                   "and shrinks good tracks)", choices=("restart", "keep", "shape"))
 
     def validate(self) -> None:
         """The cross-field checks ``config.validate`` calls: the filter's, and initial_box is empty or
@@ -263,7 +264,7 @@ class DockingTracker:
             return None
         boxes, track = table_boxes(rows), ag.to_box(self.filter.estimate)
         on_track = box_iou(boxes, track) >= cfg.override_iou
-        if cfg.keep_agreeing:
+        if cfg.keep_agreeing or cfg.override_agreeing == "keep":
             on_track |= centres_agree(boxes, track)
         if on_track.any():
             self._away, self._away_box = 0, None
@@ -272,16 +273,16 @@ class DockingTracker:
         return best if self._away >= cfg.override_after else None
 
     def _override_state(self, box: np.ndarray):
-        """Where the override restarts (``override_restart``): the detection's box, or with ``shape`` and a
+        """Where the override restarts (``override_agreeing``): the detection's box, or with ``shape`` and a
         detection that agrees with the track on the centre, the track's shape at the detection's place and size."""
         track = self.filter.estimate
-        if self.config.override_restart == "shape" and centres_agree(box[None], ag.to_box(track))[0]:
+        if self.config.override_agreeing == "shape" and centres_agree(box[None], ag.to_box(track))[0]:
             return shaped_restart(track, box)
         return box
 
 
 def shaped_restart(track: np.ndarray, box) -> np.ndarray:
-    """``override_restart`` shape: the state ``track`` (3x3) moved to the centre of ``box`` (x, y, w, h) and scaled
+    """``override_agreeing`` shape: the state ``track`` (3x3) moved to the centre of ``box`` (x, y, w, h) and scaled
     about it so that its axis-aligned box has the area of ``box``; rotation, aspect and skew are the track's."""
     box = np.asarray(box, dtype=float)
     p, own = ag.to_params(track), ag.to_box(track)
