@@ -19,8 +19,8 @@ all day must settle what happens before the aircraft appears and when the track 
   jet bridge that hides the aircraft, the model learns the bridge: Ŝ 0.96-0.99 at polygon IoU
   < 0.3 on the tuning approaches), so the score cannot tell. The detector can: when it finds the
   aircraft ``override_after`` times away from the track (no row of the class overlapping the
-  track's box by ``override_iou``), each time where it found it the time before, the filter
-  restarts on that detection.
+  track's box by ``override_iou``, or by ``override_iou_agreeing`` for a row that agrees with the track
+  on the centre), each time where it found it the time before, the filter restarts on that detection.
   **Evidence** (``lost_evidence``): the score alone is a knife edge on a stand (a track on the aircraft, turned
   by ``rotation_gain``, sat at Ŝ 0.67-0.73 with IoU 0.78 and was declared lost; a drifted one scores 0.71).
   ``silhouette``: a frame under ``lost_score`` does not count while the static camera vouches for the track (the
@@ -106,14 +106,12 @@ class DockingConfig(FilterConfig):
                                    "with it, 95 %, 0.653 without)")
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
-    override_agreeing: str = param("restart", "the override and a detection that agrees with the track on the centre "
-                                   "(each box holds the other's centre) but overlaps it by less than override_iou: "
-                                   "restart = it is away, the restart is on its box (the cascade's axis-aligned box); "
-                                   "keep = it is on the track, it does not count (keep_agreeing does this for the "
-                                   "re-acquisition of a lost track too); shape = it is away, the restart keeps the "
-                                   "track's rotation, aspect and skew at the detection's centre and area (measured: the "
-                                   "cascade's box of a tracked aircraft is often a part of it, 0.2-0.35 log smaller, "
-                                   "and shrinks good tracks)", choices=("restart", "keep", "shape"))
+    override_iou_agreeing: float = param(0.3, "a detection that agrees with the track on the centre (each box "
+                                         "holds the other's centre) is away from it below this IoU instead of "
+                                         "override_iou: the cascade's box of a tracked aircraft is often a part of "
+                                         "it (0.2-0.35 log smaller than the truth) and restarted good tracks on it "
+                                         "at override_iou 0.5, while a detection off the track's centre is the "
+                                         "aircraft elsewhere", low=0.0, high=1.0)
 
     def validate(self) -> None:
         """The cross-field checks ``config.validate`` calls: the filter's, and initial_box is empty or
@@ -230,7 +228,7 @@ class DockingTracker:
         if self.state == TRACKING and self.config.override_after > 0:
             box = self._detected_away(detections)
             if box is not None:
-                return self.start(frame, self._override_state(box), detected=True)
+                return self.start(frame, box, detected=True)
         r = self.filter.step(frame)
         low = self._low_frame(r)
         self._low = self._low + 1 if low else 0
@@ -252,7 +250,8 @@ class DockingTracker:
 
     def _detected_away(self, detections: np.ndarray | None) -> np.ndarray | None:
         """The override rule: the aircraft detection to restart on, or None. A frame counts when no row of
-        the aircraft class overlaps the track's box by ``override_iou`` and the best row is where the last
+        the aircraft class overlaps the track's box by ``override_iou`` (``override_iou_agreeing`` for a row that
+        agrees with the track on the centre, ``geometry.centres_agree``) and the best row is where the last
         counted frame's was (IoU >= 0.3); a row on the track resets the count; no row leaves it (the
         detector misses frames)."""
         cfg = self.config
@@ -263,32 +262,15 @@ class DockingTracker:
         if best is None:
             return None
         boxes, track = table_boxes(rows), ag.to_box(self.filter.estimate)
-        on_track = box_iou(boxes, track) >= cfg.override_iou
-        if cfg.keep_agreeing or cfg.override_agreeing == "keep":
-            on_track |= centres_agree(boxes, track)
+        agree = centres_agree(boxes, track)
+        on_track = box_iou(boxes, track) >= np.where(agree, cfg.override_iou_agreeing, cfg.override_iou)
+        if cfg.keep_agreeing:
+            on_track |= agree
         if on_track.any():
             self._away, self._away_box = 0, None
             return None
         self._away, self._away_box = _run_at(self._away, self._away_box, best), best
         return best if self._away >= cfg.override_after else None
-
-    def _override_state(self, box: np.ndarray):
-        """Where the override restarts (``override_agreeing``): the detection's box, or with ``shape`` and a
-        detection that agrees with the track on the centre, the track's shape at the detection's place and size."""
-        track = self.filter.estimate
-        if self.config.override_agreeing == "shape" and centres_agree(box[None], ag.to_box(track))[0]:
-            return shaped_restart(track, box)
-        return box
-
-
-def shaped_restart(track: np.ndarray, box) -> np.ndarray:
-    """``override_agreeing`` shape: the state ``track`` (3x3) moved to the centre of ``box`` (x, y, w, h) and scaled
-    about it so that its axis-aligned box has the area of ``box``; rotation, aspect and skew are the track's."""
-    box = np.asarray(box, dtype=float)
-    p, own = ag.to_params(track), ag.to_box(track)
-    p[:2] = box[:2] + box[2:] / 2
-    p[2] *= np.sqrt(box[2] * box[3] / (own[2] * own[3]))
-    return ag.from_params(p)
 
 
 def _run_at(count: int, last: np.ndarray | None, box: np.ndarray) -> int:
