@@ -278,30 +278,6 @@ def test_a_detection_that_agrees_on_the_centre_is_away_below_override_iou_agreei
     assert all(restarts(elsewhere, away, agreeing) for away, agreeing in ((0.3, 0.3), (0.5, 0.3), (0.5, 0.5)))
 
 
-def test_an_agreeing_detection_does_not_override_a_track_the_static_camera_vouches_for():
-    """override_vouched: a detection 1.6x the track's size about its centre (IoU 0.39 < override_iou 0.5) does not
-    count while the filter's frames say the static camera vouched for the track (on_target), and restarts the
-    track when they do not, or without the option; a detection elsewhere restarts a vouched-for track too."""
-    frame, _ = next(moving_target_scene(1))
-    x, y, w, h = 120, 90, 60, 40
-    track = ag.from_box(x, y, w, h)
-    large = (x - 0.3 * w + 4, y - 0.3 * h - 3, 1.6 * w, 1.6 * h)
-    elsewhere = (x + 3 * w, y + 2 * h, w, h)
-
-    def restarts(box, vouched, on_target):
-        tracker = DockingTracker(DockingConfig(override_after=2, override_iou=0.5, override_iou_agreeing=0.5,
-                                               override_vouched=vouched, seed=0))
-        tracker.start(frame, track)
-        tracker.filter.step = lambda f: FrameResult(track, 0.9, 20, False, track[None], on_target=on_target)
-        tracker.step(frame)                                    # a frame without rows: the filter says on_target
-        return any(tracker.step(frame, detections((*box, 0.9, 1))).started for _ in range(3))
-
-    assert not restarts(large, True, True)
-    assert restarts(large, True, False)
-    assert restarts(large, False, True)
-    assert restarts(elsewhere, True, True)
-
-
 def test_state_row():
     row = state_row(DockingResult(TRACKING, ag.from_box(0, 0, 40, 10), 0.8, 33))
     assert row.dtype == STATE_DTYPE and len(row) == 1

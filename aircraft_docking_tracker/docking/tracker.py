@@ -20,8 +20,7 @@ all day must settle what happens before the aircraft appears and when the track 
   < 0.3 on the tuning approaches), so the score cannot tell. The detector can: when it finds the
   aircraft ``override_after`` times away from the track (no row of the class overlapping the
   track's box by ``override_iou``, or by ``override_iou_agreeing`` for a row that agrees with the track
-  on the centre; with ``override_vouched`` such a row does not count while the static camera vouches for the
-  track), each time where it found it the time before, the filter restarts on that detection.
+  on the centre), each time where it found it the time before, the filter restarts on that detection.
   **Evidence** (``lost_evidence``): the score alone is a knife edge on a stand (a track on the aircraft, turned
   by ``rotation_gain``, sat at Ŝ 0.67-0.73 with IoU 0.78 and was declared lost; a drifted one scores 0.71).
   ``silhouette``: a frame under ``lost_score`` does not count while the static camera vouches for the track (the
@@ -113,11 +112,6 @@ class DockingConfig(FilterConfig):
                                          "it (0.2-0.35 log smaller than the truth) and restarted good tracks on it "
                                          "at override_iou 0.5, while a detection off the track's centre is the "
                                          "aircraft elsewhere", low=0.0, high=1.0)
-    override_vouched: bool = param(False, "a detection that agrees with the track on the centre (each box holds the "
-                                   "other's centre) does not count for the override while the static camera vouched for "
-                                   "the track on the frame before (the moving silhouette around X̂ had X̂'s place and "
-                                   "size, FrameResult.on_target): the cascade's box of a tracked aircraft is often a "
-                                   "part of it, and a track that grew over a jet bridge or shrank is not vouched for")
 
     def validate(self) -> None:
         """The cross-field checks ``config.validate`` calls: the filter's, and initial_box is empty or
@@ -186,7 +180,6 @@ class DockingTracker:
         self._low = self._good = 0
         self._away, self._away_box = 0, None
         self._seen, self._seen_box = 0, None
-        self._vouched = False
         if len(self.config.initial_box) == 4:
             self.request_start(self.config.initial_box)
 
@@ -217,7 +210,6 @@ class DockingTracker:
         self.state, self._low, self._good, self._pending = TRACKING, 0, 0, None
         self._away, self._away_box = 0, None
         self._seen, self._seen_box = 0, None
-        self._vouched = False
         return DockingResult(TRACKING, state.copy(), 1.0, 0, True, state[None].copy())
 
     def step(self, frame: np.ndarray, detections: np.ndarray | None = None) -> DockingResult:
@@ -238,7 +230,6 @@ class DockingTracker:
             if box is not None:
                 return self.start(frame, box, detected=True)
         r = self.filter.step(frame)
-        self._vouched = r.on_target
         low = self._low_frame(r)
         self._low = self._low + 1 if low else 0
         self._good = 0 if low else self._good + 1
@@ -260,8 +251,7 @@ class DockingTracker:
     def _detected_away(self, detections: np.ndarray | None) -> np.ndarray | None:
         """The override rule: the aircraft detection to restart on, or None. A frame counts when no row of
         the aircraft class overlaps the track's box by ``override_iou`` (``override_iou_agreeing`` for a row that
-        agrees with the track on the centre, ``geometry.centres_agree``; none for it with ``override_vouched`` while
-        the static camera vouched for the track) and the best row is where the last
+        agrees with the track on the centre, ``geometry.centres_agree``) and the best row is where the last
         counted frame's was (IoU >= 0.3); a row on the track resets the count; no row leaves it (the
         detector misses frames)."""
         cfg = self.config
@@ -274,7 +264,7 @@ class DockingTracker:
         boxes, track = table_boxes(rows), ag.to_box(self.filter.estimate)
         agree = centres_agree(boxes, track)
         on_track = box_iou(boxes, track) >= np.where(agree, cfg.override_iou_agreeing, cfg.override_iou)
-        if cfg.keep_agreeing or (cfg.override_vouched and self._vouched):
+        if cfg.keep_agreeing:
             on_track |= agree
         if on_track.any():
             self._away, self._away_box = 0, None
