@@ -253,6 +253,31 @@ def test_a_detection_that_agrees_on_the_centre_restarts_nothing_with_keep_agreei
         assert restarts(large, state, False)
 
 
+def test_a_detection_that_agrees_on_the_centre_is_away_below_override_iou_agreeing():
+    """override_iou 0.5 with override_iou_agreeing 0.3: a detection 1.6x the track's size about its centre (IoU 0.39,
+    the cascade's loose or partial box of the tracked aircraft) does not restart the track, one beside it (shifted
+    0.52 widths: its centre off the track's box, IoU 0.32) does; override_iou 0.3 restarts on neither, override_iou
+    and override_iou_agreeing 0.5 on both. A detection elsewhere restarts in every case."""
+    frame, _ = next(moving_target_scene(1))
+    x, y, w, h = 120, 90, 60, 40
+    track = ag.from_box(x, y, w, h)
+    large = (x - 0.3 * w + 4, y - 0.3 * h - 3, 1.6 * w, 1.6 * h)
+    beside = (x + 0.52 * w, y, w, h)
+    elsewhere = (x + 3 * w, y + 2 * h, w, h)
+
+    def restarts(box, away, agreeing):
+        tracker = DockingTracker(DockingConfig(override_after=2, override_iou=away, override_iou_agreeing=agreeing,
+                                               seed=0))
+        tracker.start(frame, track)
+        tracker.filter.step = lambda f: FrameResult(track, 0.9, 20, False, track[None])
+        return any(tracker.step(frame, detections((*box, 0.9, 1))).started for _ in range(3))
+
+    assert [restarts(large, 0.5, 0.3), restarts(beside, 0.5, 0.3)] == [False, True]
+    assert [restarts(large, 0.3, 0.3), restarts(beside, 0.3, 0.3)] == [False, False]
+    assert [restarts(large, 0.5, 0.5), restarts(beside, 0.5, 0.5)] == [True, True]
+    assert all(restarts(elsewhere, away, agreeing) for away, agreeing in ((0.3, 0.3), (0.5, 0.3), (0.5, 0.5)))
+
+
 def test_state_row():
     row = state_row(DockingResult(TRACKING, ag.from_box(0, 0, 40, 10), 0.8, 33))
     assert row.dtype == STATE_DTYPE and len(row) == 1

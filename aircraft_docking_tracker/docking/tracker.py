@@ -19,8 +19,8 @@ all day must settle what happens before the aircraft appears and when the track 
   jet bridge that hides the aircraft, the model learns the bridge: Ŝ 0.96-0.99 at polygon IoU
   < 0.3 on the tuning approaches), so the score cannot tell. The detector can: when it finds the
   aircraft ``override_after`` times away from the track (no row of the class overlapping the
-  track's box by ``override_iou``), each time where it found it the time before, the filter
-  restarts on that detection.
+  track's box by ``override_iou``, or by ``override_iou_agreeing`` for a row that agrees with the track
+  on the centre), each time where it found it the time before, the filter restarts on that detection.
   **Evidence** (``lost_evidence``): the score alone is a knife edge on a stand (a track on the aircraft, turned
   by ``rotation_gain``, sat at Ŝ 0.67-0.73 with IoU 0.78 and was declared lost; a drifted one scores 0.71).
   ``silhouette``: a frame under ``lost_score`` does not count while the static camera vouches for the track (the
@@ -106,6 +106,12 @@ class DockingConfig(FilterConfig):
                                    "with it, 95 %, 0.653 without)")
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
+    override_iou_agreeing: float = param(0.3, "a detection that agrees with the track on the centre (each box "
+                                         "holds the other's centre) is away from it below this IoU instead of "
+                                         "override_iou: the cascade's box of a tracked aircraft is often a part of "
+                                         "it (0.2-0.35 log smaller than the truth) and restarted good tracks on it "
+                                         "at override_iou 0.5, while a detection off the track's centre is the "
+                                         "aircraft elsewhere", low=0.0, high=1.0)
 
     def validate(self) -> None:
         """The cross-field checks ``config.validate`` calls: the filter's, and initial_box is empty or
@@ -244,7 +250,8 @@ class DockingTracker:
 
     def _detected_away(self, detections: np.ndarray | None) -> np.ndarray | None:
         """The override rule: the aircraft detection to restart on, or None. A frame counts when no row of
-        the aircraft class overlaps the track's box by ``override_iou`` and the best row is where the last
+        the aircraft class overlaps the track's box by ``override_iou`` (``override_iou_agreeing`` for a row that
+        agrees with the track on the centre, ``geometry.centres_agree``) and the best row is where the last
         counted frame's was (IoU >= 0.3); a row on the track resets the count; no row leaves it (the
         detector misses frames)."""
         cfg = self.config
@@ -255,9 +262,10 @@ class DockingTracker:
         if best is None:
             return None
         boxes, track = table_boxes(rows), ag.to_box(self.filter.estimate)
-        on_track = box_iou(boxes, track) >= cfg.override_iou
+        agree = centres_agree(boxes, track)
+        on_track = box_iou(boxes, track) >= np.where(agree, cfg.override_iou_agreeing, cfg.override_iou)
         if cfg.keep_agreeing:
-            on_track |= centres_agree(boxes, track)
+            on_track |= agree
         if on_track.any():
             self._away, self._away_box = 0, None
             return None
