@@ -246,10 +246,10 @@ class FilterConfig(AppearanceConfig):
                                      "this many times (the running median absorbs an aircraft that stands or grows "
                                      "slowly at the stop; 0: learnt everywhere; measured at 1.3 with extent_still "
                                      "measure: much worse on the tuning seeds, docs/docking_tracker.md)", low=0.0, high=3.0)
-    background_relight: bool = param(False, "static camera: the background is kept under its own light: each frame, "
-                                     "brought back by the gain and offset fitted outside the target, is what it moves "
-                                     "toward (false: toward the frame as seen, so under a light that drifts faster than "
-                                     "background_step the bright sky lags and merges with the aircraft)")
+    background_relight: bool = param(False, "static camera: the background takes each frame's light (the gain and "
+                                     "offset fitted outside the target) before it steps toward the frame (false: it steps "
+                                     "toward the frame as seen, so under a light that changes faster than background_step "
+                                     "the bright sky lags and merges with the aircraft)")
     foreground_frames: int = param(1, "static camera: the foreground is the minimum over this many trusted frames in "
                                    "a row (rain streaks and the bands of a clipping colour channel under a changing "
                                    "light last one frame, the aircraft stays; 1: this frame's alone)", low=1, high=5)
