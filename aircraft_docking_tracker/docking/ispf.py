@@ -176,6 +176,12 @@ class FilterConfig(AppearanceConfig):
                                 "its centre to this frame's silhouette major axis (gated as rotation_gain), X̂ itself not "
                                 "turned: the particles follow a model that prefers the silhouette's rotation",
                                 choices=("estimate", "silhouette"))
+    learn_max_turn: float = param(0.8, "learn_rotation silhouette: the model learns the silhouette's rotation only when "
+                                  "this frame's angle between X̂'s u axis and it is at most this [rad], else X̂'s own "
+                                  "(0.8: always, the angle is at most 45 deg; a level stand-cascade box 30 deg off, taught "
+                                  "the whole turn, caught up and overshot the levelling aircraft by 10 deg; measured at "
+                                  "0.15: the cascade's loss halved, and most of the polygon's and box's gain lost)",
+                                  low=0.0, high=0.8)
     estimate: str = param("weighted", "X̂_t (step 7): weighted = weighted mean on the group of the top_k "
                           "particles, weights exp((S - S_max)/τ); best = the argmax particle (the seed's)",
                           choices=("weighted", "best"))
@@ -694,7 +700,7 @@ class AffineParticleFilter:
         if self.config.shape_prior == "silhouette" and accepted:
             turn = self._measure_shape(estimate)
             agrees = turn is not None and self._agrees(estimate, turn)
-            if agrees and self.config.learn_rotation == "silhouette":
+            if agrees and self.config.learn_rotation == "silhouette" and abs(turn) <= self.config.learn_max_turn:
                 learnt = estimate @ self._turn_to_silhouette(estimate, turn, 1.0)
                 learnt_patch = self._observe(learnt[None])[0]
                 self.shape_counts["learnt turned"] += 1
