@@ -174,8 +174,10 @@ class FilterConfig(AppearanceConfig):
                                 "error and then prefers it: from the first polygon X̂ stayed 10-12 deg turned to the stop, "
                                 "its own patch scoring 0.99 and the truth's rotation 0.75); silhouette = X̂ turned about "
                                 "its centre to this frame's silhouette major axis (gated as rotation_gain), X̂ itself not "
-                                "turned: the particles follow a model that prefers the silhouette's rotation",
-                                choices=("estimate", "silhouette"))
+                                "turned: the particles follow a model that prefers the silhouette's rotation; shaped = "
+                                "silhouette on a track started on the target's rotation (a turned start state or a "
+                                "re-fitted box), else estimate (a level detector box taught the whole turn overshot)",
+                                choices=("estimate", "silhouette", "shaped"))
     learn_max_turn: float = param(0.8, "learn_rotation silhouette: the model learns the silhouette's rotation only when "
                                   "this frame's angle between X̂'s u axis and it is at most this [rad], else X̂'s own "
                                   "(0.8: always, the angle is at most 45 deg; a level stand-cascade box 30 deg off, taught "
@@ -377,6 +379,7 @@ class AffineParticleFilter:
         self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
                              "invalid": 0}
         self._still_run = 0                 # frames in a row the target was still (extent_still_after)
+        self._shaped = False                # learn_rotation shaped: the track started on the target's rotation
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "still": 0, "none": 0, "implausible": 0, "refused": 0}
 
     # ------------------------------------------------------------------ shared building blocks
@@ -511,6 +514,7 @@ class AffineParticleFilter:
         self._frames, self._still_run = 0, 0
         axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
         self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
+        self._shaped = not axis_aligned       # learn_rotation shaped: the start has the target's rotation
         self._start_track = [(frame, state.copy())] if self._start_box is not None else []
         if self._static_camera and background is not None:
             self.background = background
@@ -700,7 +704,8 @@ class AffineParticleFilter:
         if self.config.shape_prior == "silhouette" and accepted:
             turn = self._measure_shape(estimate)
             agrees = turn is not None and self._agrees(estimate, turn)
-            if agrees and self.config.learn_rotation == "silhouette" and abs(turn) <= self.config.learn_max_turn:
+            learn = self.config.learn_rotation == "silhouette" or (self.config.learn_rotation == "shaped" and self._shaped)
+            if agrees and learn and abs(turn) <= self.config.learn_max_turn:
                 learnt = estimate @ self._turn_to_silhouette(estimate, turn, 1.0)
                 learnt_patch = self._observe(learnt[None])[0]
                 self.shape_counts["learnt turned"] += 1
@@ -777,6 +782,7 @@ class AffineParticleFilter:
             self.start_counts["invalid"] += 1
             return None
         self.start_counts["refitted"] += 1
+        self._shaped = True
         current = self._image, self._level, self._frame_shape
         patches = []
         for frame, state in self._start_track:        # the frames so far under the re-fitted track
