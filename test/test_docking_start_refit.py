@@ -119,3 +119,32 @@ def test_a_loose_box_start_takes_the_aircrafts_rotation_within_the_first_frames(
         on = np.median(rotation_errors(5, frames, quads))
         assert off > 15.0
         assert on < 8.0
+
+
+def test_learn_rotation_shaped_learns_on_a_track_started_on_the_targets_rotation_only():
+    """learn_rotation shaped: the polygon start and a loose box once re-fitted have the aircraft's rotation (the model
+    may learn the silhouette's); a level detector box (never re-fitted) does not (taught the whole 30 deg turn, such a
+    track overshot the levelling aircraft: docs/docking_tracker.md, session 12)."""
+    import cv2  # noqa: PLC0415
+
+    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
+                                growth=4.5, turn_deg=25.0, difficulty=1)
+    frames, quads = [], []
+    for f in DockingScene(config, seed=400).frames():
+        if f.index > 6:
+            break
+        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
+        quads.append(f.quad)
+    lo, hi = quads[0].min(axis=0), quads[0].max(axis=0)
+    shaped = {}
+    for name, where, detected in (("polygon", quads[0], False), ("box", [*lo, *(hi - lo)], False),
+                                  ("detector", [*lo, *(hi - lo)], True)):
+        tracker = DockingTracker(DockingConfig(learn_rotation="shaped", seed=0))
+        tracker.start(frames[0], where, detected=detected)
+        before = tracker.filter._shaped
+        for frame in frames[1:]:
+            tracker.step(frame)
+        shaped[name] = (before, tracker.filter._shaped, tracker.filter.start_counts["refitted"])
+    assert shaped["polygon"][:2] == (True, True)
+    assert shaped["box"] == (False, True, 1)
+    assert shaped["detector"] == (False, False, 0)
