@@ -160,7 +160,8 @@ def test_training_tools_build_the_setups_cascade_alone():
     (``cascade_detector``); the set-up's ``low_confidence_band`` needs a verifier, so the band is dropped with it
     (session 11's band broke both tools: ConfigError before any scan)."""
     import sys
-    tools = str(package_config_dir().parent / "tools")
+    from pathlib import Path
+    tools = str(Path(__file__).resolve().parent.parent / "tools")      # the checkout's tools (not installed)
     sys.path.insert(0, tools)
     try:
         from train_uav_verifier import cascade_detector
