@@ -263,7 +263,8 @@ class StaticBackground:
         self.still_run = self.still_run + 1 if shift <= self.motion_max_shift else 0
         if self.measure_motion and shift <= self.max_shift and self.still_run > self.still_frames:
             self.motion = target_motion(self._previous, image, state, self.scale)
-        if shift <= self.max_shift and not self.camera_moving:
+        still_camera = shift <= self.max_shift and not self.camera_moving   # this frame measures a foreground
+        if still_camera:
             d = cv2.blur(difference * self.known, (5, 5))
             median, sigma = _median_and_noise(d[outside][::5])
             threshold = median + self.k * sigma + (self.flicker if self.flicker is not None else 0.0)
@@ -282,10 +283,10 @@ class StaticBackground:
             self._recent = []
         if len(self.first) < self.keep_first:
             self.first.append(image)
-        if self.relight and lit is not None and shift <= self.max_shift and not self.camera_moving:
+        if self.relight and still_camera:       # (a still camera had the background outside to fit the light)
             self.background = lit               # B takes this frame's light at once (still camera), the scene by step
         frozen = None           # freeze: only on a still camera (after a pan, B inside the region must be relearnt)
-        if self.freeze > 0 and shift <= self.max_shift and not self.camera_moving:
+        if self.freeze > 0 and still_camera:
             frozen = state_mask(state, self.freeze, image.shape, self.scale) > 0
         self._learn(image, frozen)
         return self.foreground
