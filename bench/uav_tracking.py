@@ -40,7 +40,8 @@ sys.path.insert(0, str(REPO))
 
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
-from aircraft_docking_tracker.evaluation.evaluate import EvaluateConfig, hidden_rows, score_mot  # noqa: E402
+from aircraft_docking_tracker.evaluation.evaluate import (  # noqa: E402
+    EvaluateConfig, hidden_rows, on_hidden_targets, score_mot)
 from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
 from aircraft_docking_tracker.object_table import confident_rows, low_confidence, table_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
@@ -172,12 +173,11 @@ def false_positive_causes(truth: np.ndarray, tracks: np.ndarray, matched: set, c
     out = dict.fromkeys(FP_CAUSES, 0)
     hyp = tracks[np.isin(tracks["state"], cfg.states())]
     hidden = hidden_rows(truth, cfg)
+    hyp = hyp[~on_hidden_targets(hyp, truth, hidden, cfg)]
     for row in hyp[~np.isin(hyp["id"], list(matched))]:
         box = table_boxes(row[None])
         counted = _best_iou(table_boxes(truth[~hidden]), box).max(initial=0.0)
         on_hidden = _best_iou(table_boxes(truth[hidden]), box).max(initial=0.0)
-        if on_hidden >= cfg.iou_threshold and on_hidden > counted:
-            continue
         out[FP_CAUSES[0 if row["state"] == CONFIRMED else 1] if counted >= 0.1 else
             FP_CAUSES[2] if on_hidden >= 0.1 else FP_CAUSES[3]] += 1
     return out

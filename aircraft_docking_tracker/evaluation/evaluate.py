@@ -220,6 +220,19 @@ def hidden_rows(table: np.ndarray, cfg: EvaluateConfig) -> np.ndarray:
     return hidden
 
 
+def on_hidden_targets(hyp: np.ndarray, truth: np.ndarray, hidden: np.ndarray, cfg: EvaluateConfig) -> np.ndarray:
+    """Hypotheses that sit on a hidden target (``hidden``: :func:`hidden_rows` of ``truth``): IoU with one at least
+    the threshold and above their IoU with any counted target. ``score_mot`` drops them, neither hit nor false
+    positive."""
+    if not hidden.any() or not len(hyp):
+        return np.zeros(len(hyp), bool)
+    iou_hidden = box_iou(table_boxes(hyp)[:, None], table_boxes(truth[hidden])[None]).max(axis=1)
+    visible_boxes = table_boxes(truth[~hidden])
+    iou_visible = (box_iou(table_boxes(hyp)[:, None], visible_boxes[None]).max(axis=1)
+                   if len(visible_boxes) else np.zeros(len(hyp)))
+    return (iou_hidden >= cfg.iou_threshold) & (iou_hidden > iou_visible)
+
+
 def score_mot(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
     """``gt``, ``out``: stamp -> TRACK_DTYPE-like tables. motmetrics via ``mot_metrics.MotEvaluator``."""
     evaluator = MotEvaluator(cfg.iou_threshold)
@@ -234,12 +247,7 @@ def score_mot(gt: dict, out: dict, cfg: EvaluateConfig) -> dict:
         if "state" in hyp.dtype.names:
             hyp = hyp[np.isin(hyp["state"], states)]
         hidden = hidden_rows(truth, cfg)
-        if hidden.any() and len(hyp):      # drop hypotheses that sit on a hidden target (distractors)
-            iou_hidden = box_iou(table_boxes(hyp)[:, None], table_boxes(truth[hidden])[None]).max(axis=1)
-            visible_boxes = table_boxes(truth[~hidden])
-            iou_visible = (box_iou(table_boxes(hyp)[:, None], visible_boxes[None]).max(axis=1)
-                           if len(visible_boxes) else np.zeros(len(hyp)))
-            hyp = hyp[~((iou_hidden >= cfg.iou_threshold) & (iou_hidden > iou_visible))]
+        hyp = hyp[~on_hidden_targets(hyp, truth, hidden, cfg)]      # distractors: neither hit nor false positive
         truth = truth[~hidden]
         evaluator.update(frame, truth["id"], table_boxes(truth), hyp["id"], table_boxes(hyp))
     scores = evaluator.result()
