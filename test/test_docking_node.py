@@ -167,7 +167,7 @@ def test_status_reports_the_static_camera_extent_counts():
         proc.process("image", image_msg(frame, k))
     status = proc.status()
     counts = {k: v for k, v in status.items() if k.startswith("extent ")}
-    assert set(counts) == {"extent measured", "extent moving", "extent untrusted", "extent still", "extent none",
+    assert set(counts) == {"extent measured", "extent moving", "extent untrusted", "extent filling", "extent still", "extent none",
                            "extent implausible", "extent refused"}
     assert sum(counts.values()) == len(scene) - 1          # every frame after the start
     assert counts["extent measured"] >= 3                  # a static camera and a clear target (7-12 here)

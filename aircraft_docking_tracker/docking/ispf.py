@@ -80,7 +80,7 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   shape prior is never measured then): the running background absorbs a standing aircraft within tens
   of frames, and what is left of its silhouette, merged with a flickering horizon, widened the estimate
   at the stop.
-* ``learn_rotation`` (static camera, off by default; helper rot12, session 12): step 8 adds X̂'s patch to the
+* ``learn_rotation`` (static camera; helper rot12, session 12; ``shaped`` the default since session 13): step 8 adds X̂'s patch to the
   subspace, so when X̂ lags the aircraft's turn the model learns the lag and then prefers it. Traced per frame
   (tuning scene 100, first polygon): at the turn's onset X̂'s patch and X̂ turned to the truth's rotation score
   alike (0.990 / 0.986); ten frames later 0.986 / 0.822, and late 0.99 / 0.75, X̂ 10-12 deg turned, while this
@@ -169,7 +169,7 @@ class FilterConfig(AppearanceConfig):
                                  "the silhouette's major axis by which X̂ (and the particles) are turned about X̂'s "
                                  "centre, on the frames the silhouette is measured (0: off, only the particles' "
                                  "rotation_pull toward the running prior)", low=0.0, high=1.0)
-    learn_rotation: str = param("estimate", "shape_prior silhouette: the rotation at which the appearance model and the "
+    learn_rotation: str = param("shaped", "shape_prior silhouette: the rotation at which the appearance model and the "
                                 "estimator learn a frame (step 8): estimate = X̂'s own (the model learns X̂'s rotation "
                                 "error and then prefers it: from the first polygon X̂ stayed 10-12 deg turned to the stop, "
                                 "its own patch scoring 0.99 and the truth's rotation 0.75); silhouette = X̂ turned about "
@@ -270,13 +270,14 @@ class FilterConfig(AppearanceConfig):
                                      "this many times (the running median absorbs an aircraft that stands or grows "
                                      "slowly at the stop; 0: learnt everywhere; measured at 1.3 with extent_still "
                                      "measure: much worse on the tuning seeds, docs/docking_tracker.md)", low=0.0, high=3.0)
-    background_relight: bool = param(False, "static camera: the background takes each frame's light (the gain and "
+    background_relight: bool = param(True, "static camera: the background takes each frame's light (the gain and "
                                      "offset fitted outside the target) before it steps toward the frame (false: it steps "
                                      "toward the frame as seen, so under a light that changes faster than background_step "
                                      "the bright sky lags and merges with the aircraft)")
-    foreground_frames: int = param(1, "static camera: the foreground is the minimum over this many trusted frames in "
-                                   "a row (rain streaks and the bands of a clipping colour channel under a changing "
-                                   "light last one frame, the aircraft stays; 1: this frame's alone)", low=1, high=5)
+    foreground_frames: int = param(2, "static camera: the foreground is the minimum over this many trusted frames in "
+                                   "a row, the earlier ones carried by the target's measured motion (rain streaks and the "
+                                   "bands of a clipping colour channel under a changing light last one frame, the "
+                                   "aircraft stays; 1: this frame's alone)", low=1, high=5)
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -347,8 +348,9 @@ class FrameResult:
     #: static camera: the foreground's silhouette around X̂ was plausible on this frame (sides 0.6-1.5x X̂'s,
     #: centre within 0.3 sides: the extent correction was measured), i.e. what moves there has X̂'s place and size
     on_target: bool = False
-    #: static camera: its foreground is not trusted on this frame (much of the scene outside X̂ changed: rain, a
-    #: light ramp), the camera not judged moving: no evidence for or against the track
+    #: static camera: no foreground on this frame, the camera not judged moving: it is not trusted (much of the scene
+    #: outside X̂ changed: rain, a light ramp) or the foreground_frames row is still filling after a break: no evidence
+    #: for or against the track
     untrusted: bool = False
 
 
@@ -388,7 +390,8 @@ class AffineParticleFilter:
                              "invalid": 0}
         self._still_run = 0                 # frames in a row the target was still (extent_still_after)
         self._shaped = False                # learn_rotation shaped: the track started on the target's rotation
-        self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "still": 0, "none": 0, "implausible": 0, "refused": 0}
+        self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "filling": 0, "still": 0, "none": 0,
+                              "implausible": 0, "refused": 0}
 
     # ------------------------------------------------------------------ shared building blocks
     @property
@@ -580,7 +583,8 @@ class AffineParticleFilter:
         merged, a partial silhouette)."""
         foreground = self.background.foreground
         if foreground is None:
-            self.extent_counts["moving" if self.background.camera_moving else "untrusted"] += 1
+            self.extent_counts["moving" if self.background.camera_moving
+                               else "filling" if self.background.trusted else "untrusted"] += 1
             return None
         self._still_run = self._still_run + 1 if self.background.target_still else 0
         if self.config.extent_still == "skip" and self._still_run > self.config.extent_still_after:
