@@ -119,7 +119,9 @@ class DetectorConfig:
     box_regressor: str = param("", "box regressor of the groups (JSON model; a bare name is looked up in "
                                "multi_target_tracker/models; empty: none): moves each edge of a group's mean box by "
                                "an offset predicted from its member windows, before containment and box_scale; "
-                               "cascade backend only (the UAV set-up's, after its verifier)")
+                               "cascade backend only (the UAV set-up's, after its verifier); a model with image "
+                               "stages then moves the groups the verifier accepts again, from the colour image "
+                               "around each box (needs the verifier)")
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)

@@ -1,6 +1,7 @@
 """Train the UAV set-up's box regressor (multi_target_tracker/box_regression.py) and choose its operating point.
 
     python tools/train_uav_box_regressor.py [--out multi_target_tracker/models/uav_vehicles_box_regressor.json]
+    python tools/train_uav_box_regressor.py --image-stages 2     # the shipped uav_vehicles_box_regressor_image.json
 
 1. **Training** (``UAV_TRAIN_SEEDS`` only: the verifier's training scenes, every 4th frame): the set-up's cascade
    (config/uav_camera.yaml's model, window margin and grouping); every group of at least the set-up's
