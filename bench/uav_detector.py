@@ -77,7 +77,7 @@ FORMER = {"model": "uav_vehicles_fused.json", "window_margin": 1.5, "min_neighbo
 # and transposed only; its operating point as it was chosen on the tuning seeds
 # the previous heading-aligned set-up (model uav_vehicles_heading.json: positives jittered for a stride-4 scan,
 # negatives mined in the upright and transposed views only; its operating point as chosen on the tuning seeds)
-PREVIOUS = {"verifier": "", "box_regressor": "", "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
+PREVIOUS = {"verifier": "", "box_regressor": "", "low_confidence_band": 0.0, "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
             "stride": 8, "min_neighbors": 8, "window_margin": 1.0, "group_iou": 0.3, "containment": 0.4,
             "box_scale": 0.9}
 HEIGHTS = (1.0, 2.0, 2.5, 3.0, 4.0)

@@ -16,6 +16,17 @@ margin-weighted mean edges (each relative to the mean box's edge, in its width o
 the members' centres and aspects, and whether the mean box touches each frame border. Trained by
 ``tools/train_uav_box_regressor.py`` on the training scenes' groups that overlap a counted vehicle by IoU
 >= 0.3; the model file is JSON.
+
+**Image stages** (version 2 files, issue 12 session 13): the member windows never look at the image, and a nadir
+vehicle is a compact blob with a strong outline against the ground. Bounding-box regression in the manner of
+R-CNN (Girshick et al. 2014, appendix C: ridge regression of the box's correction from features of the proposal's
+image region, applied again to its own output) moves each box once more, in ``stages`` applied in turn, each a
+ridge regression of :func:`edge_offsets` on :func:`image_features` of the box's region (grown ``grow`` times about
+its centre, resampled to ``size`` x ``size`` pixels) followed by the group's :data:`FEATURES`: the colour
+gradient profiles along x and y, the profiles of the colour distance from the region's rim (the ground's colour),
+and where those profiles' mass and peaks lie, in the box's own coordinates. The detector applies them to the
+groups its verifier accepts (published low-confidence ones included), after the verifier read its colour in the
+member-statistics box, so the verifier's input is unchanged.
 """
 from __future__ import annotations
 
@@ -24,18 +35,29 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from multi_target_tracker.verifier import check_json_model, load_json_model
 
 BOX_REGRESSOR_FORMAT = "aircraft_docking_tracker/group-box-regressor"
-BOX_REGRESSOR_VERSION = 1
+BOX_REGRESSOR_VERSION = 2        # 2: with image stages (version 1 files, without them, still load)
 FEATURES = ("bias", "log_count", "log_margin_sum", "best_margin", "log_aspect", "log_area_8",
             "p10_left", "p90_right", "p10_top", "p90_bottom", "min_left", "max_right", "min_top", "max_bottom",
             "centre_x_spread", "centre_y_spread", "aspect_spread", "mean_abs_log_aspect",
             "weighted_left", "weighted_right", "weighted_top", "weighted_bottom",
             "at_left_border", "at_top_border", "at_right_border", "at_bottom_border")
 BORDER_PX = 2.0
+PROFILE_QUANTILES = (0.05, 0.1, 0.2, 0.5, 0.8, 0.9, 0.95)
+
+
+def image_feature_names(size: int) -> tuple[str, ...]:
+    """The names of :func:`image_features`' columns for a ``size`` x ``size`` region."""
+    profiles = tuple(f"{kind}_{k}" for kind in ("grad_x", "grad_y", "contrast_x", "contrast_y") for k in range(size))
+    quantiles = tuple(f"{kind}_q{int(q * 100)}" for kind in ("contrast_x", "contrast_y", "grad_x", "grad_y")
+                      for q in PROFILE_QUANTILES)
+    return profiles + quantiles + ("grad_x_peak_left", "grad_x_peak_right", "grad_y_peak_top", "grad_y_peak_bottom",
+                                   "log_contrast", "log_gradient")
 
 
 class BoxRegressorError(ValueError):
@@ -82,6 +104,125 @@ def member_features(boxes: np.ndarray, margins: np.ndarray, label: np.ndarray, g
     return out
 
 
+def region_patch(bgr: np.ndarray, box, grow: float, size: int) -> np.ndarray:
+    """``(size, size, 3)`` float32: the region of ``box`` (x, y, w, h) grown ``grow`` times about its centre,
+    resampled bilinearly after a Gaussian blur against aliasing (sigma 0.4 of the sampling step); the image
+    reflected beyond its border."""
+    x, y, w, h = (float(v) for v in box)
+    rw, rh = grow * max(w, 1.0), grow * max(h, 1.0)
+    x0, y0 = x + w / 2 - rw / 2, y + h / 2 - rh / 2
+    sx, sy = rw / size, rh / size
+    ix0, iy0 = int(math.floor(x0)) - 3, int(math.floor(y0)) - 3
+    ix1, iy1 = int(math.ceil(x0 + rw)) + 3, int(math.ceil(y0 + rh)) + 3
+    height, width = bgr.shape[:2]
+    top, left = min(max(iy0, 0), height - 1), min(max(ix0, 0), width - 1)
+    bottom, right = max(min(iy1, height), top + 1), max(min(ix1, width), left + 1)
+    crop = bgr[top:bottom, left:right]
+    pads = (top - iy0, iy1 - bottom, left - ix0, ix1 - right)
+    if any(pads):
+        crop = cv2.copyMakeBorder(crop, *(max(p, 0) for p in pads), cv2.BORDER_REFLECT)
+    ix0, iy0 = left - max(pads[2], 0), top - max(pads[0], 0)
+    crop = crop.astype(np.float32)
+    if sx > 1.2 or sy > 1.2:
+        crop = cv2.GaussianBlur(crop, (0, 0), sigmaX=max(0.4 * sx, 0.3), sigmaY=max(0.4 * sy, 0.3))
+    ox, oy = x0 - ix0, y0 - iy0
+    m = np.array([[sx, 0.0, ox + 0.5 * sx - 0.5], [0.0, sy, oy + 0.5 * sy - 0.5]])
+    return cv2.warpAffine(crop, m, (size, size), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REFLECT)
+
+
+def _mass_positions(profile: np.ndarray) -> np.ndarray:
+    """Where the cumulative mass of ``profile`` reaches each of :data:`PROFILE_QUANTILES` (0-1 along it)."""
+    c = np.cumsum(profile)
+    c = c / max(c[-1], 1e-9)
+    return np.searchsorted(c, PROFILE_QUANTILES).astype(np.float64) / len(profile)
+
+
+def image_features(bgr: np.ndarray, boxes: np.ndarray, grow: float, size: int) -> np.ndarray:
+    """``(len(boxes), len(image_feature_names(size)))``: what the image shows of each box's region
+    (:func:`region_patch`): the largest-channel |Sobel| x / y gradients averaged over the box's own rows / columns
+    (profiles along x / y), the same profiles of the colour distance from the region's rim (median colour of its
+    outer pixels: the ground), each set scaled by its mean; where each profile's mass reaches
+    :data:`PROFILE_QUANTILES` (the contrast profiles less their 20th percentile) and the gradient peaks in each half,
+    in the box's own coordinates (0 its left / top edge, 1 its right / bottom edge); the logs of the two scales."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    inner = int(round(size * (1 - 1 / grow) / 2))
+    band = slice(inner, size - inner)
+    rim = np.ones((size, size), bool)
+    m = max(2, inner // 2)
+    rim[m:size - m, m:size - m] = False
+    half = size // 2
+    out = np.zeros((len(boxes), 4 * size + 4 * len(PROFILE_QUANTILES) + 6))
+    for k, box in enumerate(boxes):
+        patch = region_patch(bgr, box, grow, size)
+        gx = np.abs(cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3)).max(axis=2)
+        gy = np.abs(cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3)).max(axis=2)
+        contrast = np.sqrt(((patch - np.median(patch[rim], axis=0)) ** 2).sum(axis=2))
+        px_g, py_g = gx[band].mean(axis=0), gy[:, band].mean(axis=1)
+        px_d, py_d = contrast[band].mean(axis=0), contrast[:, band].mean(axis=1)
+        sc, sg = max(px_d.mean() + py_d.mean(), 1.0), max(px_g.mean() + py_g.mean(), 1.0)
+        positions = np.concatenate([
+            _mass_positions(np.maximum(px_d - np.percentile(px_d, 20), 0)),
+            _mass_positions(np.maximum(py_d - np.percentile(py_d, 20), 0)), _mass_positions(px_g),
+            _mass_positions(py_g), [np.argmax(px_g[:half]) / size, (half + np.argmax(px_g[half:])) / size,
+                                    np.argmax(py_g[:half]) / size, (half + np.argmax(py_g[half:])) / size]])
+        out[k] = np.concatenate([px_g / sg, py_g / sg, px_d / sc, py_d / sc, positions * grow - (grow - 1) / 2,
+                                 [math.log(sc), math.log(sg)]])
+    return out
+
+
+def image_stage_features(bgr: np.ndarray, boxes: np.ndarray, member: np.ndarray, grow: float, size: int) -> np.ndarray:
+    """An image stage's rows: a bias, :func:`image_features` of ``boxes`` and the groups' ``member`` statistics
+    (their :data:`FEATURES` rows without the bias)."""
+    member = np.asarray(member, np.float64).reshape(-1, len(FEATURES))
+    return np.column_stack([np.ones(len(member)), image_features(bgr, boxes, grow, size), member[:, 1:]])
+
+
+@dataclass
+class ImageStage:
+    """One image stage: the region's ``grow`` and ``size``, standardisation and ridge weights over
+    :func:`image_features` followed by :data:`FEATURES` (bias first, as in :class:`BoxRegressor`)."""
+
+    grow: float
+    size: int
+    mean: np.ndarray
+    std: np.ndarray
+    weights: np.ndarray
+
+    def names(self) -> tuple[str, ...]:
+        return ("bias",) + image_feature_names(self.size) + FEATURES[1:]
+
+    def features(self, bgr: np.ndarray, boxes: np.ndarray, member: np.ndarray) -> np.ndarray:
+        return image_stage_features(bgr, boxes, member, self.grow, self.size)
+
+    def refine(self, bgr: np.ndarray, boxes: np.ndarray, member: np.ndarray) -> np.ndarray:
+        return apply_offsets(boxes, ((self.features(bgr, boxes, member) - self.mean) / self.std) @ self.weights)
+
+    def to_dict(self) -> dict:
+        return {"grow": self.grow, "size": self.size, "features": list(self.names()), "mean": self.mean.tolist(),
+                "std": self.std.tolist(), "weights": self.weights.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ImageStage":
+        try:
+            grow, size = float(d["grow"]), int(d["size"])
+            if not (1.0 <= grow <= 4.0 and 8 <= size <= 128):
+                raise ValueError(f"grow {grow} outside [1, 4] or size {size} outside [8, 128]")
+            stage = cls(grow, size, *(np.asarray(d[k], np.float64) for k in ("mean", "std", "weights")))
+            names = stage.names()
+            if list(d["features"]) != list(names):
+                raise ValueError("features are not image_feature_names(size) followed by FEATURES")
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
+            raise BoxRegressorError(f"malformed image stage ({type(exc).__name__}: {exc})") from None
+        n = len(names)
+        if stage.mean.shape != (n,) or stage.std.shape != (n,) or stage.weights.shape != (n, 4):
+            raise BoxRegressorError(f"an image stage needs mean and std of {n} values, weights {n} x 4")
+        if not (np.isfinite(stage.mean).all() and np.isfinite(stage.std).all() and np.isfinite(stage.weights).all()) \
+                or (stage.std <= 0).any():
+            raise BoxRegressorError("an image stage holds a non-finite number or a std <= 0")
+        return stage
+
+
 def edge_offsets(boxes: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """``(n, 4)`` offsets of ``truth``'s left, right, top, bottom edges from ``boxes``' (in the boxes' widths /
     heights): the regression's targets."""
@@ -103,12 +244,14 @@ def apply_offsets(boxes: np.ndarray, offsets: np.ndarray) -> np.ndarray:
 
 @dataclass
 class BoxRegressor:
-    """A ridge regression of :func:`edge_offsets` on :data:`FEATURES`: standardisation and weights (n x 4)."""
+    """A ridge regression of :func:`edge_offsets` on :data:`FEATURES`: standardisation and weights (n x 4); and
+    optionally the :class:`ImageStage` s applied after it (:meth:`refine_image`)."""
 
     mean: np.ndarray
     std: np.ndarray
     weights: np.ndarray
     info: dict = field(default_factory=dict)
+    image_stages: list = field(default_factory=list)
 
     def offsets(self, features: np.ndarray) -> np.ndarray:
         features = np.asarray(features, np.float64).reshape(-1, len(FEATURES))
@@ -118,9 +261,21 @@ class BoxRegressor:
         """The groups' boxes with each edge moved by the predicted offset."""
         return apply_offsets(group_boxes, self.offsets(features))
 
+    def refine_image(self, bgr: np.ndarray, boxes: np.ndarray, features: np.ndarray) -> np.ndarray:
+        """``boxes`` (those :meth:`refine` gave) moved by each image stage in turn, reading ``bgr``; ``features``
+        the groups' :data:`FEATURES` rows. Without image stages ``boxes`` as they are."""
+        boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+        for stage in self.image_stages if len(boxes) else ():
+            boxes = stage.refine(bgr, boxes, features)
+        return boxes
+
     def to_dict(self) -> dict:
-        return {"format": BOX_REGRESSOR_FORMAT, "version": BOX_REGRESSOR_VERSION, "features": list(FEATURES),
-                "mean": self.mean.tolist(), "std": self.std.tolist(), "weights": self.weights.tolist(), "info": self.info}
+        d = {"format": BOX_REGRESSOR_FORMAT, "version": BOX_REGRESSOR_VERSION if self.image_stages else 1,
+             "features": list(FEATURES), "mean": self.mean.tolist(), "std": self.std.tolist(),
+             "weights": self.weights.tolist(), "info": self.info}
+        if self.image_stages:
+            d["image_stages"] = [stage.to_dict() for stage in self.image_stages]
+        return d
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=1))
@@ -128,7 +283,12 @@ class BoxRegressor:
     @classmethod
     def from_dict(cls, d: dict) -> "BoxRegressor":
         """A regressor from its JSON form; refuses another format, other features, non-finite numbers."""
-        check_json_model(d, BOX_REGRESSOR_FORMAT, BOX_REGRESSOR_VERSION, FEATURES, BoxRegressorError, "box regressor")
+        version = d.get("version") if isinstance(d, dict) and d.get("version") in (1, BOX_REGRESSOR_VERSION) else \
+            BOX_REGRESSOR_VERSION
+        check_json_model(d, BOX_REGRESSOR_FORMAT, version, FEATURES, BoxRegressorError, "box regressor")
+        stages = d.get("image_stages", [])
+        if (version == 1) != (not stages) or not isinstance(stages, list):
+            raise BoxRegressorError("a version 2 box regressor needs image stages, a version 1 one has none")
         try:
             mean, std = (np.asarray(d[k], np.float64).reshape(-1) for k in ("mean", "std"))
             weights = np.asarray(d["weights"], np.float64)
@@ -138,7 +298,7 @@ class BoxRegressor:
             raise BoxRegressorError(f"mean and std need {len(FEATURES)} values, weights {len(FEATURES)} x 4")
         if not (np.isfinite(mean).all() and np.isfinite(std).all() and np.isfinite(weights).all()) or (std <= 0).any():
             raise BoxRegressorError("the box regressor holds a non-finite number or a std <= 0")
-        return cls(mean, std, weights, dict(d.get("info", {})))
+        return cls(mean, std, weights, dict(d.get("info", {})), [ImageStage.from_dict(stage) for stage in stages])
 
     @classmethod
     def load(cls, path: str | Path) -> "BoxRegressor":
@@ -159,3 +319,19 @@ def fit_box_regressor(features: np.ndarray, offsets: np.ndarray, l2: float = 100
     penalty[0] = 0.0
     weights = np.linalg.solve(z.T @ z + np.diag(penalty), z.T @ y)
     return BoxRegressor(mean, std, weights, {"samples": int(len(x)), "l2": float(l2)})
+
+
+def fit_image_stage(features: np.ndarray, offsets: np.ndarray, grow: float, size: int, l2: float = 30.0) -> ImageStage:
+    """Ridge regression of ``offsets`` (n x 4) on an image stage's ``features`` (:meth:`ImageStage.features`'
+    rows); the bias column is neither standardised nor penalised."""
+    n = 1 + len(image_feature_names(size)) + len(FEATURES) - 1
+    x = np.asarray(features, np.float64).reshape(-1, n)
+    y = np.asarray(offsets, np.float64).reshape(-1, 4)
+    if len(x) != len(y) or len(x) < n:
+        raise BoxRegressorError(f"fitting an image stage needs as many targets as rows and at least {n} rows")
+    mean, std = x.mean(axis=0), x.std(axis=0) + 1e-6
+    mean[0], std[0] = 0.0, 1.0
+    z = (x - mean) / std
+    penalty = np.full(n, float(l2))
+    penalty[0] = 0.0
+    return ImageStage(float(grow), int(size), mean, std, np.linalg.solve(z.T @ z + np.diag(penalty), z.T @ y))

@@ -36,6 +36,8 @@ windows are kept by its log odds instead of their count, and a ``box_regressor``
 then moves each kept group's box edges by offsets predicted from where its member windows lie; without a
 verifier a ``box_regressor`` moves the boxes of the groups of at least ``min_neighbors`` windows the same way
 (before containment; measured on the drone-view prefix folds by ``bench/detector.py --box-regression``).
+A box regressor with image stages (``box_regression.ImageStage``) then moves the verified groups' boxes again
+from what the colour image shows around them; it needs the verifier (colour images).
 On the drone-view tiles this grouping, against keeping the best window of each cluster, took
 detection at <= 10 % false alarms from 70 % to 91 % with the same cascade (bench/README.md).
 """
@@ -117,7 +119,9 @@ class DetectorConfig:
     box_regressor: str = param("", "box regressor of the groups (JSON model; a bare name is looked up in "
                                "multi_target_tracker/models; empty: none): moves each edge of a group's mean box by "
                                "an offset predicted from its member windows, before containment and box_scale; "
-                               "cascade backend only (the UAV set-up's, after its verifier)")
+                               "cascade backend only (the UAV set-up's, after its verifier); a model with image "
+                               "stages then moves the groups the verifier accepts again, from the colour image "
+                               "around each box (needs the verifier)")
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -163,6 +167,9 @@ class DetectorConfig:
             regressor = load_box_regressor(self)
         except (DetectorError, BoxRegressorError) as exc:
             raise ConfigError(f"box regressor {self.box_regressor!r}: {exc}", ("box_regressor",)) from None
+        if regressor is not None and regressor.image_stages and not self.verifier:
+            raise ConfigError(f"box regressor {self.box_regressor!r} reads the image (image stages): it needs the "
+                              "verifier (colour images)", ("box_regressor", "verifier"))
         for_models = regressor.info.get("for_models") if regressor is not None else None
         if for_models and Path(self.model).name not in for_models:   # its offsets fit those models' windows only
             raise ConfigError(f"box regressor {self.box_regressor!r} was trained for {', '.join(for_models)}, not "
@@ -557,29 +564,37 @@ class Detector:
 
     def _groups(self, boxes: np.ndarray, margins: np.ndarray, margin_floor: float, frame_size: tuple[int, int]):
         """The groups of at least ``min_neighbors`` windows: ``(mean boxes, boxes refined by the box regressor (the
-        mean boxes without one), counts, margin sums, best margins)``."""
+        mean boxes without one), counts, margin sums, best margins, box regression features (None without a
+        regressor))``."""
         cfg = self.config
         members = group_members(boxes, margins, cfg.group_iou)
         kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
-        refined = group_boxes
+        refined, regression = group_boxes, None
         if self.box_regressor is not None and len(group_boxes):
-            refined = self.box_regressor.refine(group_boxes, member_features(
-                members[0], members[1], members[2], kept, group_boxes, margin_floor, frame_size))
-        return group_boxes, refined, counts, margin_sums, best
+            regression = member_features(members[0], members[1], members[2], kept, group_boxes, margin_floor,
+                                         frame_size)
+            refined = self.box_regressor.refine(group_boxes, regression)
+        return group_boxes, refined, counts, margin_sums, best, regression
 
     def candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
         """Every group of at least ``min_neighbors`` windows before the verifier decides: ``(boxes, log odds)``,
-        the boxes refined by the box regressor if one is configured (before ``box_scale``)."""
-        group_boxes, refined, counts, margin_sums, best = self._groups(boxes, margins, margin_floor, bgr.shape[1::-1])
+        the boxes refined by the box regressor's member statistics if one is configured (before its image stages
+        and ``box_scale``)."""
+        return self._candidates(bgr, boxes, margins, margin_floor)[:2]
+
+    def _candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+        """:meth:`candidates` and the groups' box regression features (None without a box regressor)."""
+        group_boxes, refined, counts, margin_sums, best, regression = self._groups(boxes, margins, margin_floor,
+                                                                                   bgr.shape[1::-1])
         colour_box = refined if self.verifier.colour_box == "refined" else group_boxes
         logit = self.verifier.logit(features(bgr, colour_box, counts, margin_sums, best))
-        return refined, logit
+        return refined, logit, regression
 
     def _regressed(self, boxes: np.ndarray, margins: np.ndarray, frame_size: tuple[int, int], margin_floor: float):
         """:func:`group_windows` with each group's mean box refined by the box regressor before containment
         (no verifier: the drone-view set-up's)."""
         cfg = self.config
-        _, group_boxes, counts, _, best = self._groups(boxes, margins, margin_floor, frame_size)
+        _, group_boxes, counts, _, best, _ = self._groups(boxes, margins, margin_floor, frame_size)
         if not len(group_boxes):
             return np.zeros((0, 4)), np.zeros(0)
         scores = counts + expit(best)
@@ -591,12 +606,15 @@ class Detector:
         ``(boxes, scores, low)``, ``low`` None without ``low_confidence_band``, else the mask of the groups published
         low-confidence (log odds within the band below ``verifier_threshold``). Containment keeps the better score
         first, so a low-confidence group never drops a detection: the others are the same with or without the band
-        (``max_detections`` aside)."""
+        (``max_detections`` aside). The box regressor's image stages, if any, move the accepted groups' boxes (each
+        box on its own, so the same with any band) before containment."""
         cfg = self.config
-        group_boxes, logit = self.candidates(bgr, boxes, margins, margin_floor)
+        group_boxes, logit, regression = self._candidates(bgr, boxes, margins, margin_floor)
         band = cfg.low_confidence_band
         accepted = logit >= cfg.verifier_threshold - band
         group_boxes, logit = group_boxes[accepted], logit[accepted]
+        if regression is not None and self.box_regressor.image_stages:
+            group_boxes = self.box_regressor.refine_image(bgr, group_boxes, regression[accepted])
         scores = expit(logit)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
         return group_boxes[keep], scores[keep], (logit[keep] < cfg.verifier_threshold) if band > 0 else None

@@ -11,7 +11,8 @@ from aircraft_docking_tracker.config import ConfigError, load_yaml_parameters, p
 from aircraft_docking_tracker.geometry import box_iou
 from conftest import require_data
 from multi_target_tracker.box_regression import (
-    FEATURES, BoxRegressor, BoxRegressorError, apply_offsets, edge_offsets, fit_box_regressor, member_features)
+    FEATURES, BoxRegressor, BoxRegressorError, ImageStage, apply_offsets, edge_offsets, fit_box_regressor,
+    fit_image_stage, image_feature_names, image_features, image_stage_features, member_features)
 from multi_target_tracker.detector import MODELS_DIR, Detector, DetectorConfig, group_members, members_stats
 from multi_target_tracker.train_cascade import read_yolo_folder, truncated
 from multi_target_tracker.verifier import FEATURES as VERIFIER_FEATURES, Verifier
@@ -150,3 +151,102 @@ def test_the_shipped_drone_view_setup_loads_its_regressor_and_moves_the_boxes_on
     assert len(iou_plain) >= 20 and moved
     assert np.median(np.concatenate(moved)) > 0.5                  # pixels: the boxes do move
     assert np.mean(iou_shipped) >= np.mean(iou_plain) - 0.01        # ... and not off the vehicles
+
+
+def _blob_scene(rng, n: int = 1):
+    """A ground-coloured image with one vehicle-like rectangle (its box) and a box placed off it."""
+    image = np.zeros((160, 200, 3), np.uint8)
+    image[:] = rng.integers(60, 140, 3)
+    w, h = rng.uniform(30, 60), rng.uniform(20, 50)
+    x, y = rng.uniform(40, 200 - 40 - w), rng.uniform(40, 160 - 40 - h)
+    image[int(round(y)):int(round(y + h)), int(round(x)):int(round(x + w))] = rng.integers(0, 256, 3)
+    truth = np.array([round(x), round(y), round(x + w) - round(x), round(y + h) - round(y)], float)
+    box = truth + np.concatenate([rng.normal(0, 0.12, 2) * truth[2:], np.zeros(2)])
+    box[2:] *= np.exp(rng.normal(0, 0.12, 2))
+    return image, truth, box
+
+
+def test_image_features_place_a_contrasting_blob_in_the_box_coordinates():
+    name = {n: k for k, n in enumerate(image_feature_names(32))}
+    image = np.full((160, 200, 3), 90, np.uint8)
+    image[60:100, 70:130] = (30, 40, 200)                           # a 60 x 40 px vehicle on even ground
+    on, right = image_features(image, np.array([[70, 60, 60, 40], [76, 60, 60, 40]], float), 1.3, 32)
+    assert on.shape == (len(image_feature_names(32)),) and np.isfinite(on).all()
+    # an even blob: 5 % of its contrast mass lies in its first 5 % (box coordinates: 0 its left edge, 1 its right)
+    assert on[name["contrast_x_q5"]] == pytest.approx(0.05, abs=0.06) and on[name["contrast_x_q95"]] == pytest.approx(
+        0.95, abs=0.06)
+    assert on[name["grad_x_peak_left"]] == pytest.approx(0.0, abs=0.08)
+    assert on[name["grad_y_peak_bottom"]] == pytest.approx(1.0, abs=0.08)
+    # the box 6 px (a tenth of its width) right of the vehicle: the vehicle's left edge shows at -0.1
+    assert right[name["contrast_x_q5"]] - on[name["contrast_x_q5"]] == pytest.approx(-0.1, abs=0.04)
+    assert right[name["grad_x_peak_left"]] == pytest.approx(-0.1, abs=0.05)
+    assert right[name["contrast_y_q5"]] == pytest.approx(on[name["contrast_y_q5"]], abs=0.03)
+    # a box at and beyond the frame's corner still reads a region (reflected), finite
+    assert np.isfinite(image_features(image, np.array([[-20.0, 150.0, 40.0, 30.0]]), 1.3, 32)).all()
+
+
+def test_fitted_image_stages_move_boxes_onto_the_blobs_and_round_trip_through_json(tmp_path):
+    rng = np.random.default_rng(3)
+    train, test = [_blob_scene(rng) for _ in range(400)], [_blob_scene(rng) for _ in range(100)]
+    member = np.zeros((1, len(FEATURES)))
+    regressor = BoxRegressor(np.zeros(len(FEATURES)), np.ones(len(FEATURES)), np.zeros((len(FEATURES), 4)))
+    boxes = np.array([b for _, _, b in train])
+    for _ in range(2):
+        x = np.vstack([image_stage_features(img, b[None], member, 1.3, 32) for (img, _, _), b in zip(train, boxes)])
+        stage = fit_image_stage(x, edge_offsets(boxes, np.array([t for _, t, _ in train])), 1.3, 32, l2=1.0)
+        regressor.image_stages.append(stage)
+        boxes = np.vstack([stage.refine(img, b[None], member) for (img, _, _), b in zip(train, boxes)])
+    path = tmp_path / "image.json"
+    regressor.save(path)
+    loaded = BoxRegressor.load(path)
+    assert json.loads(path.read_text())["version"] == 2 and len(loaded.image_stages) == 2
+    before = np.array([box_iou(b, t) for _, t, b in test])
+    after = np.array([box_iou(loaded.refine_image(img, b[None], member)[0], t) for img, t, b in test])
+    assert np.mean(before) < 0.75 and np.mean(after) > np.mean(before) + 0.1
+    assert np.allclose(loaded.refine_image(*test[0][::2], member), regressor.refine_image(*test[0][::2], member))
+    assert np.array_equal(regressor.refine_image(test[0][0], np.zeros((0, 4)), np.zeros((0, len(FEATURES)))).shape,
+                          (0, 4))
+
+
+@pytest.mark.parametrize("change", [
+    {"version": 1}, {"image_stages": []}, {"image_stages": [{"grow": 1.3}]}, {"image_stages": "x"},
+    {"image_stages": [{"grow": 9.0, "size": 32}]}, {"version": 2, "features": ["a"]}])
+def test_a_malformed_image_stage_is_refused(tmp_path, change):
+    n = 1 + len(image_feature_names(16)) + len(FEATURES) - 1
+    stage = ImageStage(1.3, 16, np.zeros(n), np.ones(n), np.zeros((n, 4)))
+    good = BoxRegressor(np.zeros(len(FEATURES)), np.ones(len(FEATURES)), np.zeros((len(FEATURES), 4)),
+                        image_stages=[stage]).to_dict()
+    path = tmp_path / "good.json"
+    path.write_text(json.dumps(good))
+    assert len(BoxRegressor.load(path).image_stages) == 1
+    path.write_text(json.dumps({**good, **change}))
+    with pytest.raises(BoxRegressorError):
+        BoxRegressor.load(path)
+
+
+def test_image_stages_move_the_verified_groups_and_need_the_verifier(tmp_path):
+    verifier = tmp_path / "v.json"
+    Verifier(np.zeros(len(VERIFIER_FEATURES)), np.ones(len(VERIFIER_FEATURES)), np.zeros(len(VERIFIER_FEATURES)),
+             5.0).save(verifier)                                   # accepts every group
+    n = 1 + len(image_feature_names(16)) + len(FEATURES) - 1
+    weights = np.zeros((n, 4))
+    weights[0] = (-0.1, 0.1, -0.1, 0.1)                            # every edge 10 % outwards
+    regressor = tmp_path / "r.json"
+    BoxRegressor(np.zeros(len(FEATURES)), np.ones(len(FEATURES)), np.zeros((len(FEATURES), 4)),
+                 image_stages=[ImageStage(1.3, 16, np.zeros(n), np.ones(n), weights)]).save(regressor)
+    with pytest.raises(ConfigError, match="needs the verifier"):
+        validate(DetectorConfig(box_regressor=str(regressor)))
+    image = np.full((240, 320, 3), 120, np.uint8)
+    windows = np.array([[50, 60, 48, 24], [54, 60, 48, 24], [50, 64, 48, 24], [200, 150, 24, 48], [204, 150, 24, 48]],
+                       float)
+    margins = np.array([2.0, 1.5, 1.2, 3.0, 2.5])
+    detectors = [Detector(validate(DetectorConfig(model="uav_vehicles_heading_all_views.json", verifier=str(verifier),
+                                                  min_neighbors=2, containment=1.0, window_margin=1.0, **extra)))
+                 for extra in ({}, {"box_regressor": str(regressor)})]
+    for det in detectors:
+        det.raw = lambda gray, margin: (windows, margins)
+    plain, moved = detectors
+    a, b = plain.detect(image), moved.detect(image)
+    assert len(a) == 2 and len(b) == 2
+    assert np.allclose(b["w"], a["w"] * 1.2) and np.allclose(b["y"] + b["h"] / 2, a["y"] + a["h"] / 2)
+    assert np.allclose(b["score"], a["score"])

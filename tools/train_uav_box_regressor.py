@@ -1,6 +1,7 @@
 """Train the UAV set-up's box regressor (multi_target_tracker/box_regression.py) and choose its operating point.
 
     python tools/train_uav_box_regressor.py [--out multi_target_tracker/models/uav_vehicles_box_regressor.json]
+    python tools/train_uav_box_regressor.py --image-stages 2     # the shipped uav_vehicles_box_regressor_image.json
 
 1. **Training** (``UAV_TRAIN_SEEDS`` only: the verifier's training scenes, every 4th frame): the set-up's cascade
    (config/uav_camera.yaml's model, window margin and grouping); every group of at least the set-up's
@@ -28,10 +29,13 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tools"))
 
 from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
-from multi_target_tracker.box_regression import edge_offsets, fit_box_regressor, member_features  # noqa: E402
+from multi_target_tracker.box_regression import (  # noqa: E402
+    edge_offsets, fit_box_regressor, fit_image_stage, image_stage_features, member_features)
 from multi_target_tracker.detector import MODELS_DIR, Detector, group_members, members_stats  # noqa: E402
+from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
+from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from train_uav_verifier import (  # noqa: E402
-    TUNING, cascade_detector, operating_point, scene_frames, setup_verifier, training_scenes)
+    SETUP, TUNING, cascade_detector, operating_point, scene_frames, setup_verifier, training_scenes)
 
 
 def samples(det: Detector, seeds) -> tuple[np.ndarray, np.ndarray]:
@@ -54,16 +58,100 @@ def samples(det: Detector, seeds) -> tuple[np.ndarray, np.ndarray]:
     return np.vstack(rows), np.vstack(targets)
 
 
+CROP_GROW = 3.0
+
+
+def published_groups(det: Detector, seeds, every: int) -> list[tuple]:
+    """``(crop, boxes, member features, target boxes, on a vehicle)`` per frame of ``seeds``: the groups the set-up
+    publishes, their boxes in a crop of CROP_GROW x the box (as :meth:`Detector._verified` gives them before the
+    image stages), each one's counted vehicle (>= 30 % visible) of best IoU and whether that IoU is >= 0.3."""
+    cfg = det.config
+    floor = cfg.verifier_threshold - cfg.low_confidence_band
+    out = []
+    for seed, difficulty in seeds:
+        for bgr, truth, ignore in scene_frames(seed, difficulty, every, min_visible=0.3):
+            boxes, margins = det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
+            refined, logit, regression = det._candidates(bgr, boxes, margins, cfg.window_margin)
+            keep = logit >= floor
+            counted = truth[~ignore]
+            if not keep.any() or not len(counted):
+                continue
+            iou = box_iou(refined[keep][:, None], counted[None])
+            target, near = counted[iou.argmax(axis=1)], iou.max(axis=1) >= 0.3
+            for box, features, t, n in zip(refined[keep], regression[keep], target, near):
+                x0, y0 = (int(v) for v in np.floor(box[:2] + box[2:] / 2 - CROP_GROW * box[2:] / 2))
+                x1, y1 = (int(v) for v in np.ceil(box[:2] + box[2:] / 2 + CROP_GROW * box[2:] / 2))
+                x0, y0 = max(x0, 0), max(y0, 0)
+                origin = np.array([x0, y0, 0.0, 0.0])
+                out.append((bgr[y0:max(y1, y0 + 1), x0:max(x1, x0 + 1)].copy(), box - origin, features, t - origin, n))
+        print(f"seed {seed}: {len(out)} published groups so far", flush=True)
+    return out
+
+
+def image_stage_iou(stages, groups) -> tuple[np.ndarray, np.ndarray]:
+    """The groups' IoU with their target vehicle before and after ``stages``."""
+    before, after = [], []
+    for crop, box, features, target, _ in groups:
+        before.append(box_iou(box, target))
+        box = box[None]
+        for stage in stages:
+            box = stage.refine(crop, box, features[None])
+        after.append(box_iou(box[0], target))
+    return np.array(before), np.array(after)
+
+
+def train_image_stages(args) -> int:
+    """``--image-stages``: see the module docstring."""
+    det = build_processor("detector", package_config_dir() / SETUP).detector
+    regressor = det.box_regressor
+    train = training_scenes(args.train_scenes)
+    groups = published_groups(det, train, 2)
+    near = np.array([g[4] for g in groups])
+    boxes = np.array([g[1] for g in groups])
+    targets = np.array([g[3] for g in groups])
+    regressor.image_stages = []
+    for k in range(args.image_stages):
+        x = np.vstack([image_stage_features(crop, box[None], f[None], args.grow, args.size)
+                       for (crop, _, f, _, _), box in zip(groups, boxes)])
+        stage = fit_image_stage(x[near], edge_offsets(boxes[near], targets[near]), args.grow, args.size, args.image_l2)
+        regressor.image_stages.append(stage)
+        boxes = np.vstack([stage.refine(crop, box[None], f[None]) for (crop, _, f, _, _), box in zip(groups, boxes)])
+        iou = box_iou(boxes[near], targets[near])
+        print(f"stage {k + 1}: training groups on a vehicle at IoU >= 0.5 {np.mean(iou >= 0.5):.3f}", flush=True)
+    tuning = published_groups(det, TUNING, 4)
+    before, after = image_stage_iou(regressor.image_stages, tuning)
+    on = before >= 0.1
+    regressor.info["image_stages"] = {
+        "train_seeds": [s for s, _ in train], "train_groups": int(near.sum()), "grow": args.grow, "size": args.size,
+        "l2": args.image_l2, "tuning_seeds": [s for s, _ in TUNING],
+        "tuning_groups_on_a_vehicle": int(on.sum()),
+        "tuning_iou_at_least_0.5_before_after": [int((before[on] >= 0.5).sum()), int((after[on] >= 0.5).sum())],
+        "tuning_mean_iou_before_after": [round(float(before[on].mean()), 4), round(float(after[on].mean()), 4)]}
+    regressor.save(args.out)
+    print(f"wrote {args.out}: {regressor.info['image_stages']}")
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=str(MODELS_DIR / "uav_vehicles_box_regressor.json"))
+    parser.add_argument("--out", default=None, help="default multi_target_tracker/models/"
+                        "uav_vehicles_box_regressor.json (with --image-stages uav_vehicles_box_regressor_image.json)")
     parser.add_argument("--train-scenes", type=int, default=30, help="training scenes of difficulty 1 (half as "
                         "many of difficulty 2)")
     parser.add_argument("--l2", type=float, default=100.0)
     parser.add_argument("--min-neighbors", type=int, nargs="+", default=[2, 3])
     parser.add_argument("--containment", type=float, nargs="+", default=[0.4, 0.5])
+    parser.add_argument("--image-stages", type=int, default=0, help="add this many image stages to the set-up's "
+                        "regressor instead (see above)")
+    parser.add_argument("--grow", type=float, default=1.3, help="image stages: region grown this many times")
+    parser.add_argument("--size", type=int, default=32, help="image stages: region resampled to size x size px")
+    parser.add_argument("--image-l2", type=float, default=30.0, help="image stages: ridge penalty")
     args = parser.parse_args()
     cv2.setNumThreads(1)
+    if args.image_stages:
+        args.out = args.out or str(MODELS_DIR / "uav_vehicles_box_regressor_image.json")
+        return train_image_stages(args)
+    args.out = args.out or str(MODELS_DIR / "uav_vehicles_box_regressor.json")
     det = cascade_detector({"box_scale": 1.0})
     train = training_scenes(args.train_scenes)
     x, y = samples(det, train)

@@ -48,13 +48,14 @@ from scipy.special import expit  # noqa: E402
 SETUP = "uav_camera.yaml"
 
 
-def scene_frames(seed: int, difficulty: int, every: int):
-    """``(bgr, boxes, ignore)`` of every ``every``-th frame of an 80-frame scene at the set-up's height."""
+def scene_frames(seed: int, difficulty: int, every: int, min_visible: float = 0.7):
+    """``(bgr, boxes, ignore)`` of every ``every``-th frame of an 80-frame scene at the set-up's height, vehicles
+    less than ``min_visible`` visible ignored."""
     scene = UavScene(UavSceneConfig(frames=80, fps=10.0, difficulty=difficulty,
                                     ground_resolution=UAV_SETUP_GROUND_RESOLUTION), seed=seed)
     for k, frame in enumerate(scene.frames()):
         if k % every == every // 2:
-            boxes, ignore = detection_truth(frame.ground_truth)
+            boxes, ignore = detection_truth(frame.ground_truth, min_visible)
             yield frame.image, boxes, ignore
 
 
