@@ -63,6 +63,14 @@ def test_fit_box_regressor_recovers_a_linear_rule_and_round_trips_through_json(t
         fit_box_regressor(x[:5], y[:5])
 
 
+def accept_all_verifier(tmp_path):
+    """A verifier model file that accepts every group (zero weights, threshold 5 below the bias)."""
+    path = tmp_path / "v.json"
+    Verifier(np.zeros(len(VERIFIER_FEATURES)), np.ones(len(VERIFIER_FEATURES)), np.zeros(len(VERIFIER_FEATURES)),
+             5.0).save(path)
+    return path
+
+
 @pytest.mark.parametrize("change", [
     {"format": "something else"}, {"version": 99}, {"features": ["a"]}, {"weights": [[1.0] * 4]},
     {"std": [0.0] * len(FEATURES)}, {"mean": [float("nan")] * len(FEATURES)}, {"mean": "abc"}])
@@ -75,9 +83,7 @@ def test_a_malformed_box_regressor_is_refused(tmp_path, change):
 
 
 def test_detector_with_a_box_regressor_needs_the_cascade_backend_and_moves_the_boxes(tmp_path):
-    verifier = tmp_path / "v.json"
-    Verifier(np.zeros(len(VERIFIER_FEATURES)), np.ones(len(VERIFIER_FEATURES)), np.zeros(len(VERIFIER_FEATURES)),
-             5.0).save(verifier)                                   # accepts every group
+    verifier = accept_all_verifier(tmp_path)
     grow = np.zeros((len(FEATURES), 4))
     grow[0] = (-0.1, 0.1, -0.1, 0.1)                               # every edge 10 % outwards
     regressor = tmp_path / "r.json"
@@ -225,9 +231,7 @@ def test_a_malformed_image_stage_is_refused(tmp_path, change):
 
 
 def test_image_stages_move_the_verified_groups_and_need_the_verifier(tmp_path):
-    verifier = tmp_path / "v.json"
-    Verifier(np.zeros(len(VERIFIER_FEATURES)), np.ones(len(VERIFIER_FEATURES)), np.zeros(len(VERIFIER_FEATURES)),
-             5.0).save(verifier)                                   # accepts every group
+    verifier = accept_all_verifier(tmp_path)
     n = 1 + len(image_feature_names(16)) + len(FEATURES) - 1
     weights = np.zeros((n, 4))
     weights[0] = (-0.1, 0.1, -0.1, 0.1)                            # every edge 10 % outwards
