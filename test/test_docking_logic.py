@@ -90,6 +90,19 @@ def test_a_detector_box_is_not_re_fitted_unless_asked():
     assert _start_refits(detected=False) == 1
     assert _start_refits(detected=True) == 0
     assert _start_refits(detected=True, refit_detections=True) == 1
+    assert _start_refits(detected=True, refit_detections=True, detection_refit_sides="silhouette") == 1
+
+
+def test_the_detection_refit_sides_apply_to_a_detector_start_only():
+    """detection_refit_sides reaches the filter for a detector's box; a requested box keeps rotated_in_box."""
+    scene = list(moving_target_scene(2))
+    box = list(ag.to_box(scene[0][1]))
+    config = DockingConfig(seed=0, override_after=0, refit_detections=True, detection_refit_sides="silhouette")
+    tracker = DockingTracker(config)
+    tracker.step(scene[0][0], detections((*box, 0.9, -1)))
+    assert tracker.filter._refit_sides == "silhouette"
+    tracker.start(scene[1][0], box)
+    assert tracker.filter._refit_sides == "box"
 
 
 def test_initial_box_parameter_and_request_start():

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker.docking import affine_group as ag
-from aircraft_docking_tracker.docking.ispf import rotated_in_box
+from aircraft_docking_tracker.docking.ispf import rotated_in_box, rotated_like_box
 from aircraft_docking_tracker.docking.static_background import start_silhouette
 from aircraft_docking_tracker.docking.tracker import DockingConfig, DockingTracker
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
@@ -28,6 +28,35 @@ def test_rotated_in_box_refuses_what_no_rectangle_fits():
     box = ag.from_box(100, 100, 80, 40)
     assert rotated_in_box(box, np.deg2rad(44.0)) is None        # beyond max_angle: near the singular 45 deg
     assert rotated_in_box(box, np.deg2rad(35.0)) is None        # a 2:1 box cannot hold a rectangle turned 35 deg
+
+
+@pytest.mark.parametrize("degrees", [-38.0, -20.0, 0.0, 12.0, 30.0])
+@pytest.mark.parametrize("aspect", [0.6, 1.0, 2.0])
+def test_rotated_like_box_is_the_turned_rectangle_of_a_known_aspect_in_its_bounding_box(degrees, aspect):
+    truth = ag.from_params(np.array([[200.0, 150.0, 60.0, aspect, np.deg2rad(degrees), 0.0]]))[0]
+    fitted = rotated_like_box(bounding_box_state(truth), np.deg2rad(degrees), aspect)
+    np.testing.assert_allclose(ag.to_quad(fitted), ag.to_quad(truth), atol=1e-6)
+
+
+@pytest.mark.parametrize("degrees", [20.0, 28.0, 35.0])
+def test_rotated_like_box_does_not_amplify_a_box_too_wide(degrees):
+    """A detector box 0.2 log wider than the turned 2:1 rectangle's bounding box (the cascade's, session 13): the
+    box fit's aspect is off by more than 0.35 log from 20 deg on (0.87 at 28 deg), the silhouette's aspect fit keeps
+    it and its scale within 0.15 log."""
+    truth = ag.from_params(np.array([[200.0, 150.0, 60.0, 2.0, np.deg2rad(degrees), 0.0]]))[0]
+    x, y, w, h = ag.to_box(truth)
+    box = ag.from_box(x - 0.1 * w, y, w * np.exp(0.2), h)
+    p_truth = ag.to_params(truth[None])[0]
+    by_box = rotated_in_box(box, np.deg2rad(degrees), min_side=0.0)
+    assert abs(np.log(ag.to_params(by_box[None])[0][3] / 2.0)) > 0.35
+    p = ag.to_params(rotated_like_box(box, np.deg2rad(degrees), 2.0)[None])[0]
+    assert abs(np.log(p[3] / 2.0)) < 1e-9 and abs(np.log(p[2] / p_truth[2])) < 0.15
+
+
+def test_rotated_like_box_refuses_a_steep_angle_or_no_aspect():
+    box = ag.from_box(100, 100, 80, 40)
+    assert rotated_like_box(box, np.deg2rad(44.0), 2.0) is None
+    assert rotated_like_box(box, np.deg2rad(10.0), 0.0) is None
 
 
 def stand(rng, shape=(240, 320)):

@@ -385,6 +385,7 @@ class AffineParticleFilter:
                                            relight=config.background_relight, persist=config.foreground_frames)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
+        self._refit_sides = "box"                     # start_refit: rotated_in_box (box) or rotated_like_box (silhouette)
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
         self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
                              "invalid": 0}
@@ -512,14 +513,16 @@ class AffineParticleFilter:
 
     # ------------------------------------------------------------------ start / step 7-9
     def start(self, frame: np.ndarray, state: np.ndarray, background: StaticBackground | None = None,
-              refit: bool = True) -> None:
+              refit: bool = True, refit_sides: str = "box") -> None:
         """Start on ``frame`` with the object at ``state`` (3x3): model, estimator, statistics, particles; given the
         previous track's ``background`` (a restart on the same camera), the static background goes on from it
         (``StaticBackground.restart``) instead of starting with the start region unknown. ``refit`` False: no
         ``start_refit`` (it stands in for the extent while the start region is unknown; on a kept background the
         extent acts from the first frame, and the re-fit's change, applied to X̂, came on top of it: scene 115
-        restarted at frame 34, log scale +0.22 -> -0.27 at the re-fit)."""
+        restarted at frame 34, log scale +0.22 -> -0.27 at the re-fit). ``refit_sides``: how the re-fit picks the
+        turned rectangle's sides (box: :func:`rotated_in_box`; silhouette: :func:`rotated_like_box`)."""
         state = np.asarray(state, dtype=float)
+        self._refit_sides = refit_sides
         self._load(frame, state)
         self._initialise(state)
         self._frames, self._still_run = 0, 0
@@ -781,10 +784,12 @@ class AffineParticleFilter:
         if silhouette.elongation < cfg.start_min_elongation:
             self.start_counts["no axis"] += 1
             return None
-        angle = silhouette.axis_angle
+        angle, aspect = silhouette.axis_angle, silhouette.elongation
         if abs(angle) > np.pi / 4:                # the box's u axis is nearer the silhouette's minor axis
             angle -= np.sign(angle) * np.pi / 2
-        fitted = rotated_in_box(box, angle)
+            aspect = 1.0 / aspect
+        fitted = (rotated_like_box(box, angle, aspect) if self._refit_sides == "silhouette"
+                  else rotated_in_box(box, angle))
         if fitted is None:
             self.start_counts["no silhouette"] += 1
             return None
@@ -910,6 +915,25 @@ def rotated_in_box(box: np.ndarray, angle: float, max_angle: float = np.deg2rad(
         return None
     out = np.eye(3)
     out[:2, :2] = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]) @ np.diag([w, h])
+    out[:2, 2] = box[:2, 2]
+    return out
+
+
+def rotated_like_box(box: np.ndarray, angle: float, aspect: float, max_angle: float = np.deg2rad(40)
+                     ) -> np.ndarray | None:
+    """The state (3x3) of the rectangle turned by ``angle`` [rad] with sides w = aspect h (the start silhouette's
+    elongation: a filled rectangle's is w / h) whose axis-aligned bounding box best matches the axis-aligned ``box``
+    state's W, H: log h = mean(log W - log(aspect |cos| + |sin|), log H - log(aspect |sin| + |cos|)); the same
+    centre. Unlike :func:`rotated_in_box` it never amplifies an error of the box's aspect (a detector box is
+    not the target's bounding box: rotated_in_box turned its 0.2 log too wide a box into a rectangle 0.7 log too
+    elongated at 28-31 deg). None when |angle| > ``max_angle`` or ``aspect`` is not positive."""
+    if abs(angle) > max_angle or not aspect > 0:
+        return None
+    big_w, big_h = box[0, 0], box[1, 1]
+    c, s = abs(np.cos(angle)), abs(np.sin(angle))
+    h = float(np.exp(0.5 * (np.log(big_w / (aspect * c + s)) + np.log(big_h / (aspect * s + c)))))
+    out = np.eye(3)
+    out[:2, :2] = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]) @ np.diag([aspect * h, h])
     out[:2, 2] = box[:2, 2]
     return out
 

@@ -104,6 +104,13 @@ class DockingConfig(FilterConfig):
                                    "the box for the turned aircraft's bounding box, which a cascade box is not (tuning "
                                    "seeds 100-119 started from the stand cascade: 75 % of runs >= 0.5, median 0.591 "
                                    "with it, 95 %, 0.653 without)")
+    detection_refit_sides: str = param("box", "refit_detections: how the re-fit of a detector box picks the turned "
+                                       "rectangle's sides. box = the box is its bounding box (rotated_in_box; an error "
+                                       "of the box's aspect is amplified 1/cos(2 angle) times: a cascade box 0.2 log wider "
+                                       "than the truth's at 28-31 deg gave aspect +0.7 log and lost the track); "
+                                       "silhouette = the aspect is the start silhouette's elongation and the size the "
+                                       "one whose bounding box best matches the box's (least squares in log)",
+                                       choices=("box", "silhouette"))
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
     override_iou_agreeing: float = param(0.3, "a detection that agrees with the track on the centre (each box "
@@ -206,7 +213,8 @@ class DockingTracker:
         refit = (not keep or self.config.restart_background == "refit") and (self.config.refit_detections
                                                                              or not detected)
         self.filter = make_filter(self.config)
-        self.filter.start(frame, state, old.background if keep else None, refit=refit)
+        self.filter.start(frame, state, old.background if keep else None, refit=refit,
+                          refit_sides=self.config.detection_refit_sides if detected else "box")
         self.state, self._low, self._good, self._pending = TRACKING, 0, 0, None
         self._away, self._away_box = 0, None
         self._seen, self._seen_box = 0, None
