@@ -101,7 +101,9 @@ FAST_SEED0, FAST_FRAMES = 300, 60      # held-out approaches in 60 frames instea
                                        # parameter was ever chosen on them (issue 11: generalise, don't fit)
 
 
-def real_sequences(data: Path, max_frames: int | None) -> list[dict]:
+def real_sequences(data: Path, max_frames: int | None, stride: int = 1) -> list[dict]:
+    """The real sequences' first ``max_frames`` frames, every ``stride``-th of them (stride 2, 3: the same footage
+    with 2x, 3x the motion per frame, a harder sequence of the same content)."""
     from aircraft_docking_tracker.scenarios.datasets import list_frames, read_sot_boxes  # noqa: PLC0415
 
     out = []
@@ -111,7 +113,8 @@ def real_sequences(data: Path, max_frames: int | None) -> list[dict]:
             print(f"bench/docking: {folder} absent, skipped", file=sys.stderr)
             continue
         files = [str(p) for p in list_frames(folder)][:max_frames]
-        gt = read_sot_boxes(folder / "groundtruth_rect.txt")[0][:len(files)]
+        gt = read_sot_boxes(folder / "groundtruth_rect.txt")[0][:len(files)][::stride]
+        files = files[::stride]
         h, w = cv2.imread(files[0], cv2.IMREAD_GRAYSCALE).shape
         out.append({"name": name, "kind": "real", "files": files, "gt_boxes": gt, "gt_quads": None, "size": [w, h]})
     return out
@@ -651,6 +654,8 @@ def main() -> int:
                              "LOSO over the --sweep candidates (results/docking_real[_<tag>].*)")
     parser.add_argument("--sweep", action="append", default=[], metavar="KEY=V1,V2",
                         help="--real-only: candidate values of a DockingConfig field, on top of --set; repeatable")
+    parser.add_argument("--real-stride", type=int, default=1,
+                        help="--real-only: every N-th frame (N x the motion per frame: harder footage of the same content)")
     parser.add_argument("--peer-worker", nargs=2, metavar=("IN", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.peer_worker:
@@ -667,7 +672,7 @@ def main() -> int:
     if args.real_only:
         peers = [] if args.no_peers or not ensure_contrib_venv() else list(CONTRIB_PEERS[:1])
         run_real(args.seeds or 3, parse_overrides(args.set), parse_sweep(args.sweep), peers,
-                 args.real_frames or 300, args.data, args.tag)
+                 args.real_frames or 300, args.data, args.tag, args.real_stride)
         return 0
     if args.candidates:
         run_candidates(args.scenes or (2 if args.quick else 20), args.seeds or (1 if args.quick else 3),
@@ -730,7 +735,7 @@ def parse_sweep(items: list[str]) -> dict[str, dict]:
 
 
 def run_real(seeds: int, base: dict, sweep: dict[str, dict], peers: list[str], real_frames: int, data: Path,
-             tag: str = "") -> dict:
+             tag: str = "", stride: int = 1) -> dict:
     """``--real-only``: ISPF (the defaults with ``base``, and each ``sweep`` candidate on top of it) on the real
     sequences over ``seeds`` tracker seeds, beside the ``peers``; per sequence the mean AUC, the worst seed and
     frames/s; with candidates, leave-one-sequence-out: each held-out sequence gets the candidate with the best mean
@@ -741,7 +746,7 @@ def run_real(seeds: int, base: dict, sweep: dict[str, dict], peers: list[str], r
     started = time.time()
     candidates = {"ISPF": base, **{label: {**base, **o} for label, o in sweep.items()}}
     results: dict[str, dict] = {}
-    sequences = real_sequences(data, real_frames)
+    sequences = real_sequences(data, real_frames, stride)
     if not sequences:
         raise SystemExit(f"bench/docking: no real sequence under {data / 'sot'} (--data, ADT_SHARED_DATA)")
     with tempfile.TemporaryDirectory(prefix="bench_docking_") as tmp_name:
@@ -766,7 +771,8 @@ def run_real(seeds: int, base: dict, sweep: dict[str, dict], peers: list[str], r
                     entry["trackers"][name] = score(seq, out)
                     print(f"{seq['name']:12s} {name:36s} AUC {entry['trackers'][name]['success_auc']:.3f}", flush=True)
     summary = summarise(results, list(candidates) + peers, list(candidates))
-    lines = [f"# Docking tracker, real sequences only ({seeds} tracker seeds, first {real_frames} frames)", "",
+    lines = [f"# Docking tracker, real sequences only ({seeds} tracker seeds, first {real_frames} frames"
+             + (f", every {stride}th" if stride > 1 else "") + ")", "",
              f"Base overrides {json.dumps(base)}; runtime {time.time() - started:.0f} s.", "",
              "| sequence | tracker | mean AUC | worst seed | frames/s |" + (" LOSO pick | LOSO AUC |" if sweep else ""),
              "|---|---|---:|---:|---:|" + ("---|---:|" if sweep else "")]
