@@ -1,6 +1,7 @@
 """Benchmark of the docking tracker (issues 4, 11): ISPF, its ablations, the plain PF and OpenCV's trackers.
 
     nice -n 10 python bench/docking.py [--quick] [--no-peers] [--real-frames N]
+    nice -n 10 python bench/docking.py --real-only [--real-stride N] [--set K=V] [--sweep K=V1,V2]
 
 One core for every tracker (BLAS, OpenMP and OpenCV threads = 1), the same frames for all.
 

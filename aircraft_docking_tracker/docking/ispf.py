@@ -26,7 +26,10 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   is the ablation. Relative floors were measured and dropped: ``μ_T - σ_T`` updated too rarely to
   follow the aircraft's growth (synthetic docking scene 0: mean polygon IoU 0.44 against 0.59 for
   the seed's rule) and ``μ_T - 3σ_T`` lets the hidden frames' own low scores widen σ_T until the
-  background is learnt anyway.
+  background is learnt anyway. ``update_relative`` (off by default) keeps the absolute floor and only lowers it,
+  to ``min(update_min_score, μ_T - k σ_T)`` but never under ``update_low``: the absolute floor alone locks a model
+  that has fallen behind the target out for good (OTB Car4 at every 3rd frame: Ŝ 0.61-0.67 from frame 3, 2
+  updates in 99 frames, lost; docs/docking_tracker.md, session 13).
 * Resampling (steps 6c and 9): systematic resampling with weights ``exp((S - S_max) / τ)``.
 * The estimate ``X̂_t`` (step 7, ``estimate``): by default the weighted mean on the group of the
   ``top_k`` best particles (weights ``exp((S - S_max)/τ)``), so that a rounding-level change of a
