@@ -1,6 +1,7 @@
 """Benchmark of the docking tracker (issues 4, 11): ISPF, its ablations, the plain PF and OpenCV's trackers.
 
     nice -n 10 python bench/docking.py [--quick] [--no-peers] [--real-frames N]
+    nice -n 10 python bench/docking.py --real-only [--real-stride N] [--set K=V] [--sweep K=V1,V2]
 
 One core for every tracker (BLAS, OpenMP and OpenCV threads = 1), the same frames for all.
 
@@ -101,7 +102,9 @@ FAST_SEED0, FAST_FRAMES = 300, 60      # held-out approaches in 60 frames instea
                                        # parameter was ever chosen on them (issue 11: generalise, don't fit)
 
 
-def real_sequences(data: Path, max_frames: int | None) -> list[dict]:
+def real_sequences(data: Path, max_frames: int | None, stride: int = 1) -> list[dict]:
+    """The real sequences' first ``max_frames`` frames, every ``stride``-th of them (stride 2, 3: the same footage
+    with 2x, 3x the motion per frame, a harder sequence of the same content)."""
     from aircraft_docking_tracker.scenarios.datasets import list_frames, read_sot_boxes  # noqa: PLC0415
 
     out = []
@@ -111,7 +114,8 @@ def real_sequences(data: Path, max_frames: int | None) -> list[dict]:
             print(f"bench/docking: {folder} absent, skipped", file=sys.stderr)
             continue
         files = [str(p) for p in list_frames(folder)][:max_frames]
-        gt = read_sot_boxes(folder / "groundtruth_rect.txt")[0][:len(files)]
+        gt = read_sot_boxes(folder / "groundtruth_rect.txt")[0][:len(files)][::stride]
+        files = files[::stride]
         h, w = cv2.imread(files[0], cv2.IMREAD_GRAYSCALE).shape
         out.append({"name": name, "kind": "real", "files": files, "gt_boxes": gt, "gt_quads": None, "size": [w, h]})
     return out
@@ -175,6 +179,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, no start re-fit (start_refit 0)": {"start_refit": 0},
     "ISPF, no detector override": {"override_after": 0},
     "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
+    "ISPF, relative update floor on a moving camera (update_relative 3)": {"update_relative": 3.0},
 }
 _DETECTOR = None
 
@@ -214,7 +219,8 @@ def run_ours(seq: dict, overrides: dict, seed: int = 0, start: str = "box") -> d
     config = DockingConfig(**{**stand, **overrides, "seed": seed})
     init = seq["gt_quads"][0] if start == "polygon" else seq["gt_boxes"][0] if start == "box" else None
     run = track(frames, init, config, len(seq["files"]), progress=False, detections=tables)
-    out = {"boxes": run.boxes, "quads": run.quads, "times": run.step_seconds, "particles": run.particles}
+    out = {"boxes": run.boxes, "quads": run.quads, "times": run.step_seconds, "particles": run.particles,
+           "scores": run.scores}
     if start == "detector":
         waiting = np.isnan(run.quads).any(axis=(1, 2))
         out["started_at"] = int(np.argmin(waiting)) if not waiting.all() else None
@@ -645,6 +651,13 @@ def main() -> int:
     parser.add_argument("--held-out", action="store_true",
                         help="--diagnose on the report's approaches (seeds 200-219, 300-309) instead of the tuning ones")
     parser.add_argument("--tag", default="", help="--diagnose: write results/docking_diagnosis_<tag>.*")
+    parser.add_argument("--real-only", action="store_true",
+                        help="only ISPF (with --set, and each --sweep value) on the real sequences beside the peers, "
+                             "LOSO over the --sweep candidates (results/docking_real[_<tag>].*)")
+    parser.add_argument("--sweep", action="append", default=[], metavar="KEY=V1,V2",
+                        help="--real-only: candidate values of a DockingConfig field, on top of --set; repeatable")
+    parser.add_argument("--real-stride", type=int, default=1,
+                        help="--real-only: every N-th frame (N x the motion per frame: harder footage of the same content)")
     parser.add_argument("--peer-worker", nargs=2, metavar=("IN", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.peer_worker:
@@ -657,6 +670,11 @@ def main() -> int:
         return 0
     if args.diagnose:
         run_diagnosis(args.seeds or (1 if args.quick else 3), parse_overrides(args.set), args.held_out, args.tag)
+        return 0
+    if args.real_only:
+        peers = [] if args.no_peers or not ensure_contrib_venv() else list(CONTRIB_PEERS[:1])
+        run_real(args.seeds or 3, parse_overrides(args.set), parse_sweep(args.sweep), peers,
+                 args.real_frames or 300, args.data, args.tag, args.real_stride)
         return 0
     if args.candidates:
         run_candidates(args.scenes or (2 if args.quick else 20), args.seeds or (1 if args.quick else 3),
@@ -706,6 +724,80 @@ def main() -> int:
     print((HERE / "results" / "docking.md").read_text())
     run_reacquisition(2 if quick else 10, 1 if quick else 2)
     return 0
+
+
+def parse_sweep(items: list[str]) -> dict[str, dict]:
+    """``["key=v1,v2", ...]`` -> {label: overrides}, one candidate per value (read as ``parse_overrides`` does)."""
+    out = {}
+    for item in items:
+        key, _, values = item.partition("=")
+        for value in values.split(","):
+            out[f"{key}={value}"] = parse_overrides([f"{key}={value}"])
+    return out
+
+
+def run_real(seeds: int, base: dict, sweep: dict[str, dict], peers: list[str], real_frames: int, data: Path,
+             tag: str = "", stride: int = 1) -> dict:
+    """``--real-only``: ISPF (the defaults with ``base``, and each ``sweep`` candidate on top of it) on the real
+    sequences over ``seeds`` tracker seeds, beside the ``peers``; per sequence the mean AUC, the worst seed and
+    frames/s; with candidates, leave-one-sequence-out: each held-out sequence gets the candidate with the best mean
+    AUC on the other four (the issue's protocol for a parameter), and the worst held-out sequence is reported.
+    Writes results/docking_real[_<tag>].json (per-frame IoU and boxes of every run, for the diagnosis) and .md."""
+    from aircraft_docking_tracker.geometry import box_iou  # noqa: PLC0415
+
+    started = time.time()
+    candidates = {"ISPF": base, **{label: {**base, **o} for label, o in sweep.items()}}
+    results: dict[str, dict] = {}
+    sequences = real_sequences(data, real_frames, stride)
+    if not sequences:
+        raise SystemExit(f"bench/docking: no real sequence under {data / 'sot'} (--data, ADT_SHARED_DATA)")
+    with tempfile.TemporaryDirectory(prefix="bench_docking_") as tmp_name:
+        for seq in sequences:
+            entry = results[seq["name"]] = {"size": seq["size"], "kind": "real", "trackers": {}, "runs": {}}
+            for label, overrides in candidates.items():
+                rows, runs = [], []
+                for s in range(seeds):
+                    out = run_ours(seq, overrides, s)
+                    rows.append(score(seq, out))
+                    iou = box_iou(out["boxes"], seq["gt_boxes"])
+                    runs.append({"seed": s, "iou": iou.tolist(), "boxes": out["boxes"].tolist(),
+                                 "scores": out["scores"].tolist()})
+                row = entry["trackers"][label] = aggregate(rows)
+                entry["runs"][label] = runs
+                print(f"{seq['name']:12s} {label:36s} AUC {row['success_auc']:.3f} (worst "
+                      f"{min(row['success_auc_seeds']):.3f}) {fps_text(row['fps'], '6.1f')} fps "
+                      f"[{time.time() - started:.0f} s]", flush=True)
+            for name in peers:
+                out = run_peer(seq, name, Path(tmp_name))
+                if out is not None:
+                    entry["trackers"][name] = score(seq, out)
+                    print(f"{seq['name']:12s} {name:36s} AUC {entry['trackers'][name]['success_auc']:.3f}", flush=True)
+    summary = summarise(results, list(candidates) + peers, list(candidates))
+    lines = [f"# Docking tracker, real sequences only ({seeds} tracker seeds, first {real_frames} frames"
+             + (f", every {stride}th" if stride > 1 else "") + ")", "",
+             f"Base overrides {json.dumps(base)}; runtime {time.time() - started:.0f} s.", "",
+             "| sequence | tracker | mean AUC | worst seed | frames/s |" + (" LOSO pick | LOSO AUC |" if sweep else ""),
+             "|---|---|---:|---:|---:|" + ("---|---:|" if sweep else "")]
+    for name, entry in results.items():
+        loso = summary["loso"].get(name, {})
+        for label, row in entry["trackers"].items():
+            worst = min(row.get("success_auc_seeds", [row["success_auc"]]))
+            extra = (f" {loso.get('picked', '')} | {loso.get('success_auc', float('nan')):.3f} |"
+                     if sweep and label == "ISPF" else (" | |" if sweep else ""))
+            lines.append(f"| {name} | {label} | {row['success_auc']:.3f} | {worst:.3f} | {fps_text(row['fps'])} |{extra}")
+    for label, row in summary["real"].items():
+        lines.append(f"| **all** | {label} | {row['mean_auc']:.3f} | {row['worst_auc']:.3f} | {fps_text(row['fps'])} |"
+                     + (" | |" if sweep else ""))
+    if sweep and summary["loso"]:
+        held = [v["success_auc"] for v in summary["loso"].values()]
+        lines += ["", f"LOSO over the candidates: mean {np.mean(held):.3f}, worst held-out sequence {min(held):.3f}."]
+    (HERE / "results").mkdir(exist_ok=True)
+    stem = "docking_real" + (f"_{tag}" if tag else "")
+    (HERE / "results" / f"{stem}.json").write_text(json.dumps({"seeds": seeds, "base": base, "sweep": sweep,
+                                                               "summary": summary, "sequences": results}))
+    (HERE / "results" / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return results
 
 
 def summarise(results: dict, labels: list[str], candidates: list[str]) -> dict:

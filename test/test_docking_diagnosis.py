@@ -67,3 +67,24 @@ def test_failure_kinds():
     slow = np.r_[np.full(30, 0.3), np.full(70, 0.6)]
     assert bench.failure_kind(slow, 0.45) == "slow start"
     assert bench.failure_kind(np.full(n, 0.55), 0.45) == "poor fit"
+
+
+def test_real_only_sweep_and_stride(tmp_path):
+    """--sweep gives one candidate per value (an unknown key is refused); --real-stride N keeps every N-th frame with
+    its own ground-truth box."""
+    import cv2  # noqa: PLC0415
+    import pytest  # noqa: PLC0415
+
+    assert bench.parse_sweep(["update_relative=1,3"]) == {"update_relative=1": {"update_relative": 1},
+                                                          "update_relative=3": {"update_relative": 3}}
+    with pytest.raises(SystemExit):
+        bench.parse_sweep(["no_such_field=1,2"])
+    folder = tmp_path / "sot" / "Car4" / "img"
+    folder.mkdir(parents=True)
+    for i in range(10):
+        cv2.imwrite(str(folder / f"{i + 1:04d}.png"), np.full((20, 30), i * 10, np.uint8))
+    (tmp_path / "sot" / "Car4" / "groundtruth_rect.txt").write_text(
+        "\n".join(f"{i + 1},2,5,6" for i in range(10)) + "\n")          # OTB: 1-based
+    seq, = bench.real_sequences(tmp_path, 9, stride=3)
+    assert [Path(f).name for f in seq["files"]] == ["0001.png", "0004.png", "0007.png"]
+    assert seq["gt_boxes"][:, 0].tolist() == [0, 3, 6] and seq["size"] == [30, 20]

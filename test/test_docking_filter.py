@@ -16,15 +16,19 @@ def textured(shape, rng, blur=2.0):
     return cv2.normalize(img, None, 20, 235, cv2.NORM_MINMAX)
 
 
-def moving_target_scene(frames=40, size=(320, 240), seed=0, visible=lambda i: True):
+def moving_target_scene(frames=40, size=(320, 240), seed=0, visible=lambda i: True, change=None):
     """Grey frames with a textured 48x32 target whose true state moves, grows x1.5 and turns 20 deg.
 
-    Yields (frame uint8, true 3x3 state); ``visible(i)`` False hides the target in frame i.
+    Yields (frame uint8, true 3x3 state); ``visible(i)`` False hides the target in frame i; ``change`` (frame, mix):
+    from that frame on, the target's texture is (1 - mix) of its own and mix of another (a lasting change of
+    appearance: light, a pose change).
     """
     rng = np.random.default_rng(seed)
     w, h = size
     background = textured((h, w), rng, 3.0)
     sprite = textured((64, 96), rng, 4.0)                 # the target's texture, 96 x 64 sprite pixels
+    if change is not None:
+        changed = (1 - change[1]) * sprite + change[1] * textured((64, 96), rng, 4.0)
     for i in range(frames):
         t = i / max(frames - 1, 1)
         X = ag.from_params([80 + 140 * t, 90 + 50 * t, np.sqrt(48 * 32) * (1 + 0.5 * t), 1.5,
@@ -34,7 +38,8 @@ def moving_target_scene(frames=40, size=(320, 240), seed=0, visible=lambda i: Tr
             # sprite pixel (c, r) -> template (u, v) = ((c + .5)/96 - .5, (r + .5)/64 - .5) -> image
             to_template = np.array([[1 / 96, 0, 0.5 / 96 - 0.5], [0, 1 / 64, 0.5 / 64 - 0.5], [0, 0, 1]])
             M = (X @ to_template)[:2] - np.array([[0, 0, 0.5], [0, 0, 0.5]])
-            warped = cv2.warpAffine(sprite, M, (w, h), flags=cv2.INTER_LINEAR, borderValue=-1)
+            texture = changed if change is not None and i >= change[0] else sprite
+            warped = cv2.warpAffine(texture, M, (w, h), flags=cv2.INTER_LINEAR, borderValue=-1)
             inside = cv2.warpAffine(np.ones_like(sprite), M, (w, h), flags=cv2.INTER_LINEAR)
             frame = np.where(inside > 0.5, warped, frame)
         frame = frame + rng.normal(0, 3, frame.shape)
@@ -129,6 +134,46 @@ def test_scale_check_moves_a_too_small_estimate_toward_the_true_scale_and_keeps_
     score, patch = flt._score(X[None])
     kept, kept_score, _ = flt._check_scale(X, float(score[0]), patch[0])
     assert np.array_equal(kept, X) and kept_score == score[0]
+
+
+def test_update_floor_is_lowered_only_under_a_lasting_low_score_on_a_moving_camera_and_never_below_update_low():
+    """``update_relative``: min(update_min_score, μ_T - k σ_T), at least ``update_low``, on a frame the camera is judged
+    moving; a still camera (its extent corrects the state) and off (0): the absolute floor."""
+    frame, X = next(moving_target_scene(1))
+    floors = {}
+    for k in (0.0, 2.0):
+        flt = AffineParticleFilter(FilterConfig(seed=0, update_relative=k))
+        flt.start(frame, X)
+        for moving in (False, True):
+            flt.background.camera_moving = moving
+            for name, (mean, std) in {"tracked": (0.95, 0.02), "lasting low": (0.66, 0.01),
+                                      "hidden": (0.5, 0.05)}.items():
+                flt.track_stats.mean, flt.track_stats.var = mean, std ** 2
+                floors[k, moving, name] = flt._update_floor()
+    assert {v for (k, moving, _), v in floors.items() if k == 0.0 or not moving} == {0.75}
+    assert floors[2.0, True, "tracked"] == 0.75                   # a high-scoring track: the absolute floor
+    assert abs(floors[2.0, True, "lasting low"] - 0.64) < 1e-9    # scores sat at 0.66: it learns again
+    assert floors[2.0, True, "hidden"] == 0.6                     # never below update_low
+
+
+def test_a_lasting_change_of_appearance_is_learnt_with_update_relative():
+    """Half of the target's texture replaced from frame 8 on, no static-camera model (what a moving camera leaves):
+    the absolute floor never updates the model again (Ŝ about 0.5-0.65, the start's model to the end); the relative
+    floor learns the new appearance (Ŝ back near 0.9) and tracks as well (medians of 3 seeds)."""
+    scene = list(moving_target_scene(40, change=(8, 0.5)))
+    runs = {}
+    for k in (0.0, 2.0):
+        for seed in range(3):
+            flt = make_filter(FilterConfig(seed=seed, update_relative=k, extent_gain=0.0, motion_gain=0.0))
+            flt.start(scene[0][0], scene[0][1])
+            results = [(flt.step(frame), truth) for frame, truth in scene[1:]]
+            late = results[10:]
+            iou = np.mean([polygon_iou(ag.to_quad(r.state)[None], ag.to_quad(t)[None])[0] for r, t in late])
+            runs.setdefault(k, []).append((iou, sum(r.updated for r, _ in late), np.mean([r.score for r, _ in late])))
+    med = {k: np.median(np.array(v), axis=0) for k, v in runs.items()}
+    assert med[0.0][1] <= 3 and med[2.0][1] >= 20, runs          # updates on the 29 late frames
+    assert med[2.0][2] > med[0.0][2] + 0.15, runs                  # the model has learnt the new texture
+    assert med[2.0][0] > 0.8 and med[2.0][0] > med[0.0][0] - 0.05, runs
 
 
 def test_ispf_uses_fewer_particles_than_its_maximum_when_the_target_is_easy():

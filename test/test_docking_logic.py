@@ -119,10 +119,14 @@ def test_initial_box_parameter_and_request_start():
         from_mapping(DockingConfig, {"initial_box": [0, 0, 0, 5]})
 
 
-def test_the_track_is_lost_when_the_aircraft_vanishes_and_reacquired_from_detections():
+@pytest.mark.parametrize("update_relative", [0.0, 2.0])
+def test_the_track_is_lost_when_the_aircraft_vanishes_and_reacquired_from_detections(update_relative):
+    """Also with the relative update floor where it acts (no static-camera model, as on a moving camera): a hidden
+    target's scores (about 0.5) stay under update_low, the background is not learnt and the track is declared lost."""
     hide_from = 12
     scene = list(moving_target_scene(40, visible=lambda i: i < hide_from or i >= 30))
-    cfg = DockingConfig(lost_after=5, lost_score=0.7, seed=0)
+    still = {} if update_relative == 0 else {"extent_gain": 0.0, "motion_gain": 0.0}
+    cfg = DockingConfig(lost_after=5, lost_score=0.7, seed=0, update_relative=update_relative, **still)
     tracker = DockingTracker(cfg)
     tracker.start(scene[0][0], scene[0][1])
     states = [tracker.step(frame).state for frame, _ in scene[1:30]]

@@ -26,7 +26,11 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   is the ablation. Relative floors were measured and dropped: ``μ_T - σ_T`` updated too rarely to
   follow the aircraft's growth (synthetic docking scene 0: mean polygon IoU 0.44 against 0.59 for
   the seed's rule) and ``μ_T - 3σ_T`` lets the hidden frames' own low scores widen σ_T until the
-  background is learnt anyway.
+  background is learnt anyway. ``update_relative`` (off by default) keeps the absolute floor and only lowers it,
+  to ``min(update_min_score, μ_T - k σ_T)`` but never under ``update_low``, and only on a moving camera (nothing else
+  corrects the state there): the absolute floor alone locks a model that has fallen behind the target out for good
+  (OTB Car4 at every 3rd frame: Ŝ 0.61-0.67 from frame 3, 2 updates in 99 frames, lost; docs/docking_tracker.md,
+  session 13).
 * Resampling (steps 6c and 9): systematic resampling with weights ``exp((S - S_max) / τ)``.
 * The estimate ``X̂_t`` (step 7, ``estimate``): by default the weighted mean on the group of the
   ``top_k`` best particles (weights ``exp((S - S_max)/τ)``), so that a rounding-level change of a
@@ -201,6 +205,16 @@ class FilterConfig(AppearanceConfig):
                              "Ŝ >= update_min_score; background = Ŝ > μ_B+σ_B only (the seed's); always",
                              choices=("guarded", "background", "always"))
     update_min_score: float = param(0.75, "guarded update: also require Ŝ >= this", low=0.0, high=1.0)
+    update_relative: float = param(0.0, "guarded update, on a frame no static camera corrects (the camera judged moving, "
+                                   "or the static-camera model off): the floor is min(update_min_score, μ_T - this·σ_T), "
+                                   "never below update_low: a track whose scores have sat under the absolute floor for a "
+                                   "while (μ_T forgets with stats_forgetting) learns again, a sudden drop (an occluder) "
+                                   "does not (OTB Car4 at every 3rd frame: Ŝ 0.61-0.67 from frame 3, 2 updates in 99 "
+                                   "frames, lost at frame 74). A still camera keeps the absolute floor: there the extent "
+                                   "restores the scale while the model waits, and learning the rainy frames shrank the "
+                                   "track (tuning scenes 107, 113: log scale -0.4 to -0.7). 0: off", low=0.0, high=10.0)
+    update_low: float = param(0.6, "update_relative: the least floor (a hidden target scores about 0.5)",
+                              low=0.0, high=1.0)
     scale_check: float = param(0.0, "multi-scale check of X̂_t: also score X̂ scaled by exp(±this) about its "
                                "centre and keep the best, if better by tune_min_gain (log units); 0: off",
                                low=0.0, high=0.5)
@@ -737,7 +751,7 @@ class AffineParticleFilter:
         rule = self.config.update_rule
         updated = rule == "always" or score > self.background_stats.mean + self.background_stats.std
         if rule == "guarded":
-            updated = updated and score >= self.config.update_min_score
+            updated = updated and score >= self._update_floor()
         updated = bool(updated)                                           # step 8
         if updated:
             self.model.add(learnt_patch)
@@ -756,6 +770,20 @@ class AffineParticleFilter:
         untrusted = (self.config.extent_gain > 0 and self.background.foreground is None
                      and not self.background.camera_moving)
         return FrameResult(estimate, score, len(states), bool(updated), states, correction is not None, untrusted)
+
+    def _update_floor(self) -> float:
+        """The guarded update's floor on Ŝ: ``update_min_score``, or with ``update_relative`` k > 0, on a frame no still
+        camera corrects (judged moving, or the static-camera model off), the lower min(update_min_score, μ_T - k σ_T),
+        at least ``update_low`` (μ_T, σ_T before this frame's score). The absolute floor alone is a trap when nothing
+        else holds the track: a model that falls behind the target's appearance (light, blur, a pose change between
+        frames further apart) scores under it, is never updated again and drifts off. On a still camera the extent
+        corrects the state while the model waits (session 13: learning there shrank the track in rain)."""
+        cfg = self.config
+        corrected = self._static_camera and not self.background.camera_moving      # a still camera's extent
+        if cfg.update_relative <= 0 or self.track_stats.count == 0 or corrected:
+            return cfg.update_min_score
+        relative = self.track_stats.mean - cfg.update_relative * self.track_stats.std
+        return max(cfg.update_low, min(cfg.update_min_score, relative))
 
     def _start_refit(self, estimate: np.ndarray) -> np.ndarray | None:
         """``start_refit``: X̂ re-fitted (and the filter started again there) to the start silhouette (static_background.start_silhouette), or None.
