@@ -179,7 +179,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, no start re-fit (start_refit 0)": {"start_refit": 0},
     "ISPF, no detector override": {"override_after": 0},
     "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
-    "ISPF, relative update floor on a moving camera (update_relative 3)": {"update_relative": 3.0},
+    "ISPF, absolute update floor only (update_relative 0)": {"update_relative": 0.0},
 }
 _DETECTOR = None
 

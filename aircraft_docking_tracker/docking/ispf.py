@@ -26,7 +26,7 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   is the ablation. Relative floors were measured and dropped: ``μ_T - σ_T`` updated too rarely to
   follow the aircraft's growth (synthetic docking scene 0: mean polygon IoU 0.44 against 0.59 for
   the seed's rule) and ``μ_T - 3σ_T`` lets the hidden frames' own low scores widen σ_T until the
-  background is learnt anyway. ``update_relative`` (off by default) keeps the absolute floor and only lowers it,
+  background is learnt anyway. ``update_relative`` (3 by default since session 13; 0: off) keeps the absolute floor and only lowers it,
   to ``min(update_min_score, μ_T - k σ_T)`` but never under ``update_low``, and only on a moving camera (nothing else
   corrects the state there): the absolute floor alone locks a model that has fallen behind the target out for good
   (OTB Car4 at every 3rd frame: Ŝ 0.61-0.67 from frame 3, 2 updates in 99 frames, lost; docs/docking_tracker.md,
@@ -205,7 +205,7 @@ class FilterConfig(AppearanceConfig):
                              "Ŝ >= update_min_score; background = Ŝ > μ_B+σ_B only (the seed's); always",
                              choices=("guarded", "background", "always"))
     update_min_score: float = param(0.75, "guarded update: also require Ŝ >= this", low=0.0, high=1.0)
-    update_relative: float = param(0.0, "guarded update, on a frame no static camera corrects (the camera judged moving, "
+    update_relative: float = param(3.0, "guarded update, on a frame no static camera corrects (the camera judged moving, "
                                    "or the static-camera model off): the floor is min(update_min_score, μ_T - this·σ_T), "
                                    "never below update_low: a track whose scores have sat under the absolute floor for a "
                                    "while (μ_T forgets with stats_forgetting) learns again, a sudden drop (an occluder) "
