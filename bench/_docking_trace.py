@@ -1,6 +1,6 @@
 """Per-run trace of the docking tracker started from the stand camera cascade (issue 11, session 13).
 
-``python bench/docking_trace.py [--seeds 2] [--set KEY=VALUE ...] [--tag NAME] [--held-out]`` runs the stand
+``python bench/_docking_trace.py [--seeds 2] [--set KEY=VALUE ...] [--tag NAME] [--held-out]`` runs the stand
 cascade start of ``bench/docking.py --diagnose`` (the same approaches, stand rules and rows every frame) with
 ``DockingTracker`` driven frame by frame, and records per run: the frame of the cascade's first aircraft row and
 of the start; the start box against the truth (box IoU with the true axis-aligned box, polygon IoU, log of its
