@@ -92,17 +92,7 @@ def test_detector_with_a_box_regressor_needs_the_cascade_backend_and_moves_the_b
         validate(DetectorConfig(backend="opencv", model="cars.xml", box_regressor=str(regressor)))
     with pytest.raises(ConfigError, match="box regressor"):
         validate(DetectorConfig(verifier=str(verifier), box_regressor=str(tmp_path / "missing.json")))
-    image = np.full((240, 320, 3), 120, np.uint8)
-    windows = np.array([[50, 60, 48, 24], [54, 60, 48, 24], [50, 64, 48, 24], [200, 150, 24, 48], [204, 150, 24, 48]],
-                       float)
-    margins = np.array([2.0, 1.5, 1.2, 3.0, 2.5])
-    detectors = [Detector(DetectorConfig(model="uav_vehicles_heading_all_views.json", verifier=str(verifier),
-                                         min_neighbors=2, containment=1.0, window_margin=1.0, **extra))
-                 for extra in ({}, {"box_regressor": str(regressor)})]
-    for det in detectors:             # the same windows for both: only the grouping and what follows it run
-        det.raw = lambda gray, margin: (windows, margins)
-    plain, moved = detectors
-    a, b = plain.detect(image), moved.detect(image)
+    a, b = _without_and_with(verifier, regressor)
     assert len(a) == 2 and len(b) == 2
     assert np.allclose(b["w"], a["w"] * 1.2) and np.allclose(b["x"] + b["w"] / 2, a["x"] + a["w"] / 2)
     assert np.allclose(b["score"], a["score"])
@@ -240,17 +230,23 @@ def test_image_stages_move_the_verified_groups_and_need_the_verifier(tmp_path):
                  image_stages=[ImageStage(1.3, 16, np.zeros(n), np.ones(n), weights)]).save(regressor)
     with pytest.raises(ConfigError, match="needs the verifier"):
         validate(DetectorConfig(box_regressor=str(regressor)))
+    a, b = _without_and_with(verifier, regressor)
+    assert len(a) == 2 and len(b) == 2
+    assert np.allclose(b["w"], a["w"] * 1.2) and np.allclose(b["y"] + b["h"] / 2, a["y"] + a["h"] / 2)
+    assert np.allclose(b["score"], a["score"])
+
+
+def _without_and_with(verifier, regressor):
+    """The detections of two UAV detectors with ``verifier``, without and with the box regressor ``regressor``, on the
+    same five raw windows (two groups): only the grouping and what follows it run."""
     image = np.full((240, 320, 3), 120, np.uint8)
     windows = np.array([[50, 60, 48, 24], [54, 60, 48, 24], [50, 64, 48, 24], [200, 150, 24, 48], [204, 150, 24, 48]],
                        float)
     margins = np.array([2.0, 1.5, 1.2, 3.0, 2.5])
-    detectors = [Detector(validate(DetectorConfig(model="uav_vehicles_heading_all_views.json", verifier=str(verifier),
-                                                  min_neighbors=2, containment=1.0, window_margin=1.0, **extra)))
-                 for extra in ({}, {"box_regressor": str(regressor)})]
-    for det in detectors:
+    found = []
+    for extra in ({}, {"box_regressor": str(regressor)}):
+        det = Detector(validate(DetectorConfig(model="uav_vehicles_heading_all_views.json", verifier=str(verifier),
+                                               min_neighbors=2, containment=1.0, window_margin=1.0, **extra)))
         det.raw = lambda gray, margin: (windows, margins)
-    plain, moved = detectors
-    a, b = plain.detect(image), moved.detect(image)
-    assert len(a) == 2 and len(b) == 2
-    assert np.allclose(b["w"], a["w"] * 1.2) and np.allclose(b["y"] + b["h"] / 2, a["y"] + a["h"] / 2)
-    assert np.allclose(b["score"], a["score"])
+        found.append(det.detect(image))
+    return found
