@@ -180,6 +180,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, no detector override": {"override_after": 0},
     "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
     "ISPF, absolute update floor only (update_relative 0)": {"update_relative": 0.0},
+    "ISPF, a restart's box held to the usual extent bound (restart_extent_low 0.6)": {"restart_extent_low": 0.6},
 }
 _DETECTOR = None
 

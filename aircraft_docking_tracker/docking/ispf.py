@@ -224,6 +224,11 @@ class FilterConfig(AppearanceConfig):
     extent_wide: float = param(2.4, "static camera: a silhouette that runs off the extent's grid (1.6 X̂) is measured "
                                "again on a grid this many times X̂ (0: not measured, as before; a lagging X̂'s own "
                                "target runs off the small grid)", low=0.0, high=5.0)
+    restart_extent_low: float = param(0.4, "static camera, a restart on a detector box (an axis-aligned box kept "
+                                      "without a start re-fit): until the first silhouette inside the usual "
+                                      "0.6-1.5x, one whose sides are down to this many times X̂'s is plausible too "
+                                      "(a cascade box around the aircraft and the jet bridge is 2x the aircraft; "
+                                      "0.6: as any other frame)", low=0.2, high=0.6)
     extent_rotation: float = param(0.0, "static camera: the measured rectangle is turned to the silhouette's "
                                    "principal axis, by at most this much per frame [rad] (0: off, the rectangle "
                                    "keeps X̂'s rotation; measured: follows the turn, but from the first polygon the "
@@ -399,6 +404,7 @@ class AffineParticleFilter:
                                            relight=config.background_relight, persist=config.foreground_frames)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
+        self._unsized = False                         # restart_extent_low: started on a box of unknown size
         self._refit_sides = "box"                     # start_refit: rotated_in_box (box) or rotated_like_box (silhouette)
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
         self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
@@ -543,6 +549,7 @@ class AffineParticleFilter:
         axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
         self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
         self._shaped = not axis_aligned       # learn_rotation shaped: the start has the target's rotation
+        self._unsized = axis_aligned and not refit     # restart_extent_low: a detector box's size is not known
         self._start_track = [(frame, state.copy())] if self._start_box is not None else []
         if self._static_camera and background is not None:
             self.background = background
@@ -617,7 +624,9 @@ class AffineParticleFilter:
             q[0, 4] += float(np.clip(extent.axis_angle, -self.config.extent_rotation, self.config.extent_rotation))
             candidate = from_chart(q)[0]
             extent = foreground_extent(foreground, candidate, self.background.scale) or extent
-        if not _plausible(extent):
+        if _plausible(extent):
+            self._unsized = False
+        elif not (self._unsized and _plausible(extent, self.config.restart_extent_low)):
             self.extent_counts["implausible"] += 1
             return None
         measured = candidate @ extent.correction()
@@ -966,10 +975,10 @@ def rotated_like_box(box: np.ndarray, angle: float, aspect: float, max_angle: fl
     return out
 
 
-def _plausible(extent) -> bool:
-    """A silhouette's rectangle the estimate may follow: sides 0.6-1.5x the estimate's, centre within 0.3
+def _plausible(extent, low: float = 0.6) -> bool:
+    """A silhouette's rectangle the estimate may follow: sides ``low``-1.5x the estimate's, centre within 0.3
     sides of its (not another object merged, not a partial silhouette)."""
-    return (0.6 < extent.width < 1.5 and 0.6 < extent.height < 1.5
+    return (low < extent.width < 1.5 and low < extent.height < 1.5
             and abs(extent.centre_u) < 0.3 and abs(extent.centre_v) < 0.3)
 
 
