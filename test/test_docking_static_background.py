@@ -81,6 +81,26 @@ def test_extent_measures_the_silhouette_in_the_estimates_frame(factor):
     assert np.allclose(ag.to_quad(corrected), ag.to_quad(truth), atol=3.0)
 
 
+def test_extent_keeps_a_silhouettes_piece_outside_a_too_narrow_estimate(monkeypatch):
+    """Rain breaks the aircraft's silhouette into pieces (fuselage, engines, wing roots). X̂ covers two of them; a
+    third, cut off by a gap, lies mostly outside X̂: the silhouette takes it (width 1.23x X̂'s; with the pieces
+    overlapping X̂'s own rectangle only, 0.88x, and X̂ would be pulled narrower still). A rain speck is left out."""
+    from aircraft_docking_tracker.docking import static_background  # noqa: PLC0415
+
+    fg = np.zeros((240, 320), np.float32)
+    for x0, x1 in ((100, 120), (150, 170), (184, 198)):   # three pieces, the last beyond X̂'s right side (180)
+        fg[110:130, x0:x1] = 1.0
+    fg[90:92, 80:82] = 1.0                                # a speck
+    estimate = ag.from_box(100, 100, 80, 40)
+    extent = foreground_extent(fg, estimate, 1.0)
+    assert extent is not None
+    assert extent.width == pytest.approx(98 / 80, abs=0.05)
+    assert extent.height == pytest.approx(0.5, abs=0.05)
+    monkeypatch.setattr(static_background, "PIECES_WITHIN", 0.5)
+    narrow = foreground_extent(fg, estimate, 1.0)
+    assert narrow.width == pytest.approx(70 / 80, abs=0.05)
+
+
 def test_the_start_region_is_learnt_once_the_target_has_left_it():
     """No inpainting guess: the start region is unknown (no foreground) until its pixels are still."""
     rng = np.random.default_rng(3)
