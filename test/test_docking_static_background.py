@@ -156,12 +156,15 @@ def test_extent_is_not_measured_when_the_silhouette_runs_off_the_search_region_o
     assert foreground_extent(fg, ag.from_box(100, 100, 80, 40), 1.0) is None
 
 
-def scene_frames(config, seed):
-    """A docking scene's grey frames and true quadrilaterals (N, 4, 2) (a DockingFrame carries float masks)."""
+def scene_frames(config, seed, count=None):
+    """A docking scene's grey frames and true quadrilaterals (N, 4, 2) (a DockingFrame carries float masks);
+    ``count``: only the first so many."""
+    import itertools  # noqa: PLC0415
+
     import cv2  # noqa: PLC0415
 
     frames, quads = [], []
-    for f in DockingScene(config, seed=seed).frames():
+    for f in itertools.islice(DockingScene(config, seed=seed).frames(), count):
         frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
         quads.append(f.quad)
     return frames, np.array(quads)
@@ -602,17 +605,9 @@ def test_a_restart_mid_approach_keeps_what_the_stand_background_knows():
     and the silhouette has holes (the extent measured on 6-7 of the next 20 frames, 27 % of the aircraft
     foreground). Kept (``restart_background`` keep), the stand is known: 16-19 of 20, 59 %. Medians over 3
     tracker seeds (Haswell, Prescott, Sandybridge, SkylakeX alike)."""
-    import itertools  # noqa: PLC0415
-
-    import cv2  # noqa: PLC0415
-
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="vehicle",
                                 growth=5.55, turn_deg=29.5, difficulty=1)
-    frames, quads = [], []
-    for f in itertools.islice(DockingScene(config, seed=115).frames(), 55):
-        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
-        quads.append(f.quad)
-    quads = np.array(quads)
+    frames, quads = scene_frames(config, 115, count=55)
     new = np.median([restart_mid_approach(frames, quads, "new", s) for s in range(3)], axis=0)
     kept = np.median([restart_mid_approach(frames, quads, "keep", s) for s in range(3)], axis=0)
     assert kept[0] >= 0.7 and new[0] <= 0.5
@@ -703,17 +698,9 @@ def test_a_restart_on_a_box_too_large_is_shrunk_to_the_silhouette():
     silhouette is then 0.5-0.6x X̂'s sides, outside the usual 0.6-1.5x, so at ``restart_extent_low`` 0.6 it is
     never measured and X̂ stays +0.5 log too large for 40 frames; at 0.4 (the default) the first measurements
     are taken and the scale is right within 0.06 log (medians over 3 tracker seeds; at 2x the box, 2 of 3)."""
-    import itertools  # noqa: PLC0415
-
-    import cv2  # noqa: PLC0415
-
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
-    frames, quads = [], []
-    for f in itertools.islice(DockingScene(config, seed=100).frames(), 70):
-        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
-        quads.append(f.quad)
-    quads = np.array(quads)
+    frames, quads = scene_frames(config, 100, count=70)
     usual = np.median([scale_after_loose_restart(frames, quads, 0.6, s) for s in range(3)])
     wide = np.median([scale_after_loose_restart(frames, quads, 0.4, s) for s in range(3)])
     assert usual > 0.35
