@@ -574,6 +574,17 @@ def test_the_model_learnt_at_the_silhouettes_rotation_turns_the_estimate_with_th
     assert defaults < 4.0, defaults       # the default (shaped) learns so on a polygon start
 
 
+def track_then_restart(tracker, frames, quads, at, grow=1.0):
+    """Start ``tracker`` on the first polygon, step it to frame ``at`` - 1, and request a restart on the aircraft's
+    bounding box at frame ``at``, ``grow`` times as large about its centre (what the detector gives a lost track)."""
+    tracker.start(frames[0], quads[0])
+    for frame in frames[1:at]:
+        tracker.step(frame)
+    lo, hi = quads[at].min(axis=0), quads[at].max(axis=0)
+    sides = (hi - lo) * grow
+    tracker.request_start(np.r_[lo - (sides - (hi - lo)) / 2, sides])
+
+
 def restart_mid_approach(frames, quads, restart_background, seed, at=34, after=20):
     """Track from the first polygon, restart at frame ``at`` on the aircraft's bounding box (what the detector
     gives a lost track), then ``after`` frames: the fraction of them with the extent measured, and the median
@@ -583,11 +594,7 @@ def restart_mid_approach(frames, quads, restart_background, seed, at=34, after=2
     # rotation_gain 0 (the default): with the turn at 0.3 the new background's extent is measured on 0.65 of the
     # frames, no longer under 0.5
     tracker = DockingTracker(DockingConfig(restart_background=restart_background, seed=seed, rotation_gain=0.0))
-    tracker.start(frames[0], quads[0])
-    for frame in frames[1:at]:
-        tracker.step(frame)
-    lo, hi = quads[at].min(axis=0), quads[at].max(axis=0)
-    tracker.request_start(np.r_[lo, hi - lo])
+    track_then_restart(tracker, frames, quads, at)
     tracker.step(frames[at])
     cover = []
     for i in range(at + 1, at + 1 + after):
@@ -680,12 +687,7 @@ def scale_after_loose_restart(frames, quads, restart_extent_low, seed, at=30, gr
     about its centre (a cascade box around the aircraft and the jet bridge), then ``after`` frames: the median
     log scale error of X̂ over the last 10."""
     tracker = DockingTracker(DockingConfig(restart_extent_low=restart_extent_low, seed=seed))
-    tracker.start(frames[0], quads[0])
-    for frame in frames[1:at]:
-        tracker.step(frame)
-    lo, hi = quads[at].min(axis=0), quads[at].max(axis=0)
-    centre, sides = (lo + hi) / 2, (hi - lo) * grow
-    tracker.request_start(np.r_[centre - sides / 2, sides])
+    track_then_restart(tracker, frames, quads, at, grow)
     errors = []
     for i in range(at, at + after):
         r = tracker.step(frames[i])
