@@ -14,6 +14,8 @@ def algebra():
     w[0] = 0.0                                       # the identity
     w[1] = [1e-9, 0, 0, 0, 1, 0]                     # nearly repeated eigenvalues
     w[2] = [0.2, 0, 0, 0.2, 1, 2]                    # real distinct eigenvalues
+    w[3] = [1e-6, 2e-6, 3e-6, 0, 5, -3]              # eigenvalues within 1e-5: the derivative branch
+    w[4] = [3e-5, 0, 4e-5, 0, 1, 1]                  # complex pair near 0: (e^z - 1)/z without cancellation
     return ag.hat(w)
 
 

@@ -27,7 +27,11 @@ image axes x right / y down, i.e. E3's sense) and ``skew = φ``.
 """
 from __future__ import annotations
 
+import cmath
+import math
+
 import cv2
+import numba
 import numpy as np
 
 from ..geometry import quad_to_box
@@ -64,45 +68,94 @@ def vee(x: np.ndarray) -> np.ndarray:
                      x[..., 0, 2], x[..., 1, 2]], axis=-1)
 
 
-def _matrix_function(B: np.ndarray, f, df) -> np.ndarray:
-    """``f(B)`` for a stack of real 2x2 matrices by Sylvester's formula (``df`` = f', for λ+ ≈ λ-)."""
-    m = (B[..., 0, 0] + B[..., 1, 1]) / 2
-    N = B - m[..., None, None] * np.eye(2)
-    q = N[..., 0, 0] ** 2 + N[..., 0, 1] * N[..., 1, 0]          # N @ N = q I (N traceless)
-    r = np.sqrt(q.astype(complex))
-    close = np.abs(r) < 1e-5
-    rs = np.where(close, 1.0, r)
-    with np.errstate(all="ignore"):           # the placeholder rs = 1 of close pairs may hit log(0)
-        fp, fm = f(m + rs), f(m - rs)
-        a = np.where(close, f(m + 0j), (fp + fm) / 2).real
-        b = np.where(close, df(m + 0j), (fp - fm) / (2 * rs)).real
-    return a[..., None, None] * np.eye(2) + b[..., None, None] * N
+EXP, LOG, PHI = 0, 1, 2    # the analytic functions f of ``_matrix_function``: exp, log, φ(λ) = (e^λ - 1)/λ
 
 
-def _phi(z):
-    """(e^z - 1)/z, 1 at z = 0."""
-    small = np.abs(z) < 1e-8
-    zs = np.where(small, 1.0, z)
-    return np.where(small, 1.0 + z / 2, np.expm1(zs) / zs)
+@numba.njit(cache=True, nogil=True)
+def _expm1(z):
+    """e^z - 1 for complex z without cancellation near 0 (numpy's formula)."""
+    half = math.sin(z.imag / 2)
+    return complex(math.expm1(z.real) * math.cos(z.imag) - 2.0 * half * half, math.exp(z.real) * math.sin(z.imag))
 
 
-def _dphi(z):
-    """d/dz (e^z - 1)/z, 1/2 at z = 0."""
-    small = np.abs(z) < 1e-4
-    zs = np.where(small, 1.0, z)
-    return np.where(small, 0.5 + z / 3, (zs * np.exp(zs) - np.expm1(zs)) / zs ** 2)
+@numba.njit(cache=True, nogil=True)
+def _f(kind, z):
+    if kind == EXP:
+        return cmath.exp(z)
+    if kind == LOG:
+        return cmath.log(z)
+    return 1.0 + z / 2 if abs(z) < 1e-8 else _expm1(z) / z
+
+
+@numba.njit(cache=True, nogil=True)
+def _df(kind, z):
+    if kind == EXP:
+        return cmath.exp(z)
+    if kind == LOG:
+        return 1.0 / z
+    return 0.5 + z / 3 if abs(z) < 1e-4 else (z * cmath.exp(z) - _expm1(z)) / (z * z)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sylvester(b00, b01, b10, b11, kind):
+    """``f(B)`` of one real 2x2 matrix by Sylvester's formula: ``a I + b N``, N = B - m I (``df`` for λ+ ≈ λ-)."""
+    m = (b00 + b11) / 2
+    n00, n11 = b00 - m, b11 - m
+    r = cmath.sqrt(complex(n00 * n00 + b01 * b10, 0.0))          # N @ N = q I (N traceless), r = sqrt(q)
+    if abs(r) < 1e-5:
+        a, b = _f(kind, complex(m, 0.0)).real, _df(kind, complex(m, 0.0)).real
+    else:
+        fp, fm = _f(kind, m + r), _f(kind, m - r)
+        a, b = ((fp + fm) / 2).real, ((fp - fm) / (2 * r)).real
+    return a + b * n00, b * b01, b * b10, a + b * n11
+
+
+@numba.njit(cache=True, nogil=True)
+def _matrices(B, kind):
+    out = np.empty_like(B)
+    for i in range(B.shape[0]):
+        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = _sylvester(B[i, 0, 0], B[i, 0, 1], B[i, 1, 0],
+                                                                            B[i, 1, 1], kind)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _expm(x):
+    out = np.zeros_like(x)
+    for i in range(x.shape[0]):
+        e00, e01, e10, e11 = _sylvester(x[i, 0, 0], x[i, 0, 1], x[i, 1, 0], x[i, 1, 1], EXP)
+        v00, v01, v10, v11 = _sylvester(x[i, 0, 0], x[i, 0, 1], x[i, 1, 0], x[i, 1, 1], PHI)
+        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = e00, e01, e10, e11
+        out[i, 0, 2] = v00 * x[i, 0, 2] + v01 * x[i, 1, 2]
+        out[i, 1, 2] = v10 * x[i, 0, 2] + v11 * x[i, 1, 2]
+        out[i, 2, 2] = 1.0
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _logm(X):
+    out = np.zeros_like(X)
+    for i in range(X.shape[0]):
+        l00, l01, l10, l11 = _sylvester(X[i, 0, 0], X[i, 0, 1], X[i, 1, 0], X[i, 1, 1], LOG)
+        v00, v01, v10, v11 = _sylvester(l00, l01, l10, l11, PHI)
+        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = l00, l01, l10, l11
+        det = v00 * v11 - v01 * v10                               # V t' = t (V = φ(log A), invertible)
+        out[i, 0, 2] = (v11 * X[i, 0, 2] - v01 * X[i, 1, 2]) / det
+        out[i, 1, 2] = (v00 * X[i, 1, 2] - v10 * X[i, 0, 2]) / det
+    return out
+
+
+def _matrix_function(B: np.ndarray, kind: int) -> np.ndarray:
+    """``f(B)`` (f = EXP, LOG or PHI) for one real 2x2 matrix or a stack (..., 2, 2) (compiled, one loop)."""
+    B = np.asarray(B, dtype=float)
+    return _matrices(np.ascontiguousarray(B.reshape(-1, 2, 2)), kind).reshape(B.shape)
 
 
 def expm(x: np.ndarray) -> np.ndarray:
-    """exp: g -> G (eq. 2) for one algebra element or a stack (..., 3, 3), in closed form."""
+    """exp: g -> G (eq. 2) for one algebra element or a stack (..., 3, 3), in closed form:
+    ``[[e^B, φ(B) t], [0, 1]]``."""
     x = np.asarray(x, dtype=float)
-    B, t = x[..., :2, :2], x[..., :2, 2]
-    out = np.zeros(x.shape)
-    out[..., :2, :2] = _matrix_function(B, np.exp, np.exp)
-    V = _matrix_function(B, _phi, _dphi)
-    out[..., :2, 2] = np.einsum("...ij,...j->...i", V, t)
-    out[..., 2, 2] = 1.0
-    return out
+    return _expm(np.ascontiguousarray(x.reshape(-1, 3, 3))).reshape(x.shape)
 
 
 def logm(X: np.ndarray) -> np.ndarray:
@@ -116,12 +169,7 @@ def logm(X: np.ndarray) -> np.ndarray:
     det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
     if np.any(~(det > 0)):
         raise AffineError("affine matrix with non-positive determinant has no real logarithm")
-    B = _matrix_function(A, np.log, lambda z: 1.0 / z)
-    out = np.zeros(X.shape)
-    out[..., :2, :2] = B
-    V = _matrix_function(B, _phi, _dphi)
-    out[..., :2, 2] = np.linalg.solve(V, X[..., :2, 2][..., None])[..., 0]
-    return out
+    return _logm(np.ascontiguousarray(X.reshape(-1, 3, 3))).reshape(X.shape)
 
 
 def exp_coords(w: np.ndarray) -> np.ndarray:
@@ -162,7 +210,7 @@ def to_params(X: np.ndarray) -> np.ndarray:
     det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] ** 2
     if np.any(~(det > 0)) or np.any(~(S[..., 0, 0] > 0)):
         raise AffineError("affine matrix is not orientation preserving")
-    L = _matrix_function(S, np.log, lambda z: 1.0 / z)
+    L = _matrix_function(S, LOG)
     s_log, alpha, phi = (L[..., 0, 0] + L[..., 1, 1]) / 2, (L[..., 0, 0] - L[..., 1, 1]) / 2, L[..., 0, 1]
     return np.stack([X[..., 0, 2], X[..., 1, 2], np.exp(s_log), np.exp(2 * alpha), theta, phi], axis=-1)
 
