@@ -120,28 +120,23 @@ def _matrices(B, kind):
 
 
 @numba.njit(cache=True, nogil=True)
-def _expm(x):
+def _affine_exp_or_log(x, log):
+    """exp (``log`` False) or log of each affine matrix of the stack: the 2x2 block ``B`` -> ``f(B)``, and with
+    ``V = φ(algebra block)`` the translation ``t -> V t`` (exp) or ``V^-1 t`` (log)."""
     out = np.zeros_like(x)
     for i in range(x.shape[0]):
-        e00, e01, e10, e11 = _sylvester(x[i, 0, 0], x[i, 0, 1], x[i, 1, 0], x[i, 1, 1], EXP)
-        v00, v01, v10, v11 = _sylvester(x[i, 0, 0], x[i, 0, 1], x[i, 1, 0], x[i, 1, 1], PHI)
-        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = e00, e01, e10, e11
-        out[i, 0, 2] = v00 * x[i, 0, 2] + v01 * x[i, 1, 2]
-        out[i, 1, 2] = v10 * x[i, 0, 2] + v11 * x[i, 1, 2]
-        out[i, 2, 2] = 1.0
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _logm(X):
-    out = np.zeros_like(X)
-    for i in range(X.shape[0]):
-        l00, l01, l10, l11 = _sylvester(X[i, 0, 0], X[i, 0, 1], X[i, 1, 0], X[i, 1, 1], LOG)
-        v00, v01, v10, v11 = _sylvester(l00, l01, l10, l11, PHI)
-        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = l00, l01, l10, l11
-        det = v00 * v11 - v01 * v10                               # V t' = t (V = φ(log A), invertible)
-        out[i, 0, 2] = (v11 * X[i, 0, 2] - v01 * X[i, 1, 2]) / det
-        out[i, 1, 2] = (v00 * X[i, 1, 2] - v10 * X[i, 0, 2]) / det
+        b00, b01, b10, b11 = x[i, 0, 0], x[i, 0, 1], x[i, 1, 0], x[i, 1, 1]
+        f00, f01, f10, f11 = _sylvester(b00, b01, b10, b11, LOG if log else EXP)
+        if log:
+            b00, b01, b10, b11 = f00, f01, f10, f11
+        v00, v01, v10, v11 = _sylvester(b00, b01, b10, b11, PHI)
+        tx, ty = x[i, 0, 2], x[i, 1, 2]
+        if log:
+            det = v00 * v11 - v01 * v10
+            v00, v01, v10, v11 = v11 / det, -v01 / det, -v10 / det, v00 / det
+        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = f00, f01, f10, f11
+        out[i, 0, 2], out[i, 1, 2] = v00 * tx + v01 * ty, v10 * tx + v11 * ty
+        out[i, 2, 2] = 0.0 if log else 1.0
     return out
 
 
@@ -155,7 +150,7 @@ def expm(x: np.ndarray) -> np.ndarray:
     """exp: g -> G (eq. 2) for one algebra element or a stack (..., 3, 3), in closed form:
     ``[[e^B, φ(B) t], [0, 1]]``."""
     x = np.asarray(x, dtype=float)
-    return _expm(np.ascontiguousarray(x.reshape(-1, 3, 3))).reshape(x.shape)
+    return _affine_exp_or_log(np.ascontiguousarray(x.reshape(-1, 3, 3)), False).reshape(x.shape)
 
 
 def logm(X: np.ndarray) -> np.ndarray:
@@ -169,7 +164,7 @@ def logm(X: np.ndarray) -> np.ndarray:
     det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
     if np.any(~(det > 0)):
         raise AffineError("affine matrix with non-positive determinant has no real logarithm")
-    return _logm(np.ascontiguousarray(X.reshape(-1, 3, 3))).reshape(X.shape)
+    return _affine_exp_or_log(np.ascontiguousarray(X.reshape(-1, 3, 3)), True).reshape(X.shape)
 
 
 def exp_coords(w: np.ndarray) -> np.ndarray:
