@@ -176,3 +176,19 @@ def test_status_reports_the_static_camera_extent_counts():
     assert set(starts) == {f"start re-fit {name}" for name in
                            ("refitted", "no silhouette", "no axis", "outside", "untrusted", "invalid")}
     assert sum(starts.values()) == 1
+
+
+def test_the_warm_up_track_is_thrown_away_and_its_failure_reported(monkeypatch):
+    """The warm-up runs a throwaway tracker (the processor's own still waits, nothing started or counted) and a
+    failure is kept for the node's log, the processor still built."""
+    from aircraft_docking_tracker.docking.tracker import DockingTracker  # noqa: PLC0415
+
+    proc = DockingProcessor(DockingConfig())
+    assert proc.warm_up_error == ""
+    assert proc.tracker.state == WAITING and proc.starts == 0 and proc.last.state == WAITING
+
+    def broken(self, frame, where, detected=False):
+        raise RuntimeError("kernel cache unreadable")
+
+    monkeypatch.setattr(DockingTracker, "start", broken)
+    assert DockingProcessor(DockingConfig()).warm_up_error == "RuntimeError: kernel cache unreadable"
