@@ -99,18 +99,13 @@ class DockingProcessor(MessageProcessor):
         self.starts = 0
         self.warm_up()
 
-    def warm_up(self) -> None:
-        """A throwaway track over two small blank frames before the node subscribes: the compiled kernels
-        (the affine group's exp and log) load, or compile on a fresh checkout, now and not on the camera's
-        first frame (that frame took 0.48 s in make demo and the stand track skipped the 3 frames behind it)."""
-        self.warm_up_error = ""
-        try:
-            tracker = DockingTracker(self.tracker.config)
-            blank = np.zeros((120, 160), np.uint8)
-            tracker.start(blank, [60.0, 40.0, 40.0, 20.0])
-            tracker.step(blank)
-        except Exception as exc:  # noqa: BLE001 - kept for the node's log; each real frame reports its own error
-            self.warm_up_error = f"{type(exc).__name__}: {exc}"
+    def warm_up_work(self) -> None:
+        """A throwaway track over two small blank frames: the compiled affine exp and log load now (the camera's
+        first frame took 0.48 s in make demo before, and the stand track skipped the 3 frames behind it)."""
+        tracker = DockingTracker(self.tracker.config)
+        blank = np.zeros((120, 160), np.uint8)
+        tracker.start(blank, [60.0, 40.0, 40.0, 20.0])
+        tracker.step(blank)
 
     def process(self, topic, msg):
         if topic == "detections":
@@ -217,10 +212,7 @@ SPEC = ProcessorSpec(NODE_NAME, {"": DockingConfig, NODE_PREFIX: DockingNodeConf
 class DockingTrackerNode(PerceptionNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        processor = self.attach_spec(SPEC)
-        if processor.warm_up_error:
-            self.get_logger().warning(f"docking tracker warm-up failed ({processor.warm_up_error}): the camera's "
-                                      "first frame loads the kernels instead")
+        self.attach_spec(SPEC)
 
     def on_config_changed(self, cfg) -> None:
         if isinstance(cfg, DockingConfig):

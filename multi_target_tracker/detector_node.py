@@ -78,18 +78,11 @@ class DetectorProcessor(MessageProcessor):
         self.configure(config or DetectorConfig())
         self.warm_up()
 
-    def warm_up(self) -> None:
-        """One small blank frame through the detector before the node subscribes: the compiled kernels load
-        (or compile, on a fresh checkout: seconds) now, not on the camera's first frame, which a live node
-        would otherwise spend while the frames behind it are skipped (make demo lost its first 26 UAV frames
-        so in a fresh worktree)."""
-        self.warm_up_error = ""
-        if self.detector is None:
-            return
-        try:
+    def warm_up_work(self) -> None:
+        """One small blank frame through the detector (make demo lost its first 26 UAV frames to the kernels'
+        loading in a fresh worktree before there was a warm-up)."""
+        if self.detector is not None:
             self.detector.detect(np.zeros((120, 160, 3) if self.detector.needs_colour else (120, 160), np.uint8))
-        except Exception as exc:  # noqa: BLE001 - kept for the node's log; each real frame is rejected with the reason
-            self.warm_up_error = f"{type(exc).__name__}: {exc}"
 
     def configure(self, config: DetectorConfig) -> None:
         """(Re)load the model; on failure every frame is rejected with the reason until fixed (the
@@ -158,9 +151,6 @@ class DetectorNode(PerceptionNode):
         processor = self.attach_spec(SPEC)
         if processor.model_error:
             self.get_logger().error(f"detector model not loaded: {processor.model_error}")
-        elif processor.warm_up_error:
-            self.get_logger().warning(f"detector warm-up frame failed ({processor.warm_up_error}): the camera's "
-                                      "first frame loads the kernels instead")
 
     def on_config_changed(self, cfg) -> None:
         if isinstance(cfg, DetectorConfig):

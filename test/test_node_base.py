@@ -203,3 +203,24 @@ def test_latency_is_reported_for_live_stamps_and_explained_for_stamps_on_another
     assert np.isnan(ahead["latency_ms_p50"]) and "30 s ahead of" in text
     slightly_ahead, text = median_latency(-0.2)  # within the skew allowed between hosts: latency 0
     assert slightly_ahead["latency_ms_p50"] == 0.0 and text == "0.00"
+
+
+def test_a_failed_warm_up_is_logged_by_the_node_and_the_node_still_runs(monkeypatch):
+    """MessageProcessor.warm_up keeps the failure; attach_processor logs it as a warning (every node alike)."""
+    class ColdProcessor(ToyProcessor):
+        def warm_up_work(self):
+            raise RuntimeError("kernel cache unreadable")
+
+    processor = ColdProcessor(ToyConfig())
+    processor.warm_up()
+    assert processor.warm_up_error == "RuntimeError: kernel cache unreadable"
+    with ros_context() as (ctx, executor):
+        node = PerceptionNode("cold", context=ctx)
+        warnings = []
+        monkeypatch.setattr(type(node.get_logger()), "warning", lambda self, text, **kw: warnings.append(text))
+        try:
+            node.attach_processor(processor)
+            assert any("warm-up failed (RuntimeError: kernel cache unreadable)" in w for w in warnings)
+            assert node.processor is processor
+        finally:
+            node.destroy_node()

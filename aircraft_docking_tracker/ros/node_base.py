@@ -252,6 +252,9 @@ class PerceptionNode(Node):
     def attach_processor(self, processor: MessageProcessor) -> MessageProcessor:
         """Subscribe to the processor's inputs and publish its outputs (see module docstring)."""
         self.processor = processor
+        if processor.warm_up_error:
+            self.get_logger().warning(f"warm-up failed ({processor.warm_up_error}): the first frame loads the "
+                                      "compiled kernels instead")
         processor.on_rejected = self.reject
         processor.on_event = self.time_jumped
         for topic, type_name in processor.outputs.items():

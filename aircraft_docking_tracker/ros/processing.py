@@ -61,6 +61,22 @@ class MessageProcessor:
     #: Set likewise to log a notable event that is not a rejection (e.g. the tracks were reset).
     on_event: Callable[[str], None] | None = None
 
+    #: Why :meth:`warm_up` failed ("" when it ran or there is nothing to warm up); the live node logs it.
+    warm_up_error: str = ""
+
+    def warm_up(self) -> None:
+        """Run :meth:`warm_up_work` before the node subscribes: compiled kernels load (or compile, on a fresh
+        checkout: seconds) now, not on the camera's first frame, which a live node would otherwise spend while
+        the frames behind it are skipped. A failure is kept in ``warm_up_error``, the processor still works."""
+        self.warm_up_error = ""
+        try:
+            self.warm_up_work()
+        except Exception as exc:  # noqa: BLE001 - kept for the node's log; each real frame reports its own error
+            self.warm_up_error = f"{type(exc).__name__}: {exc}"
+
+    def warm_up_work(self) -> None:
+        """A throwaway input through the processor's cores (override); nothing by default."""
+
     def report_rejection(self, reason: str) -> None:
         if self.on_rejected is not None:
             self.on_rejected(reason)
