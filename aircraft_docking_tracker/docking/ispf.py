@@ -229,6 +229,13 @@ class FilterConfig(AppearanceConfig):
                                       "0.6-1.5x, one whose sides are down to this many times X̂'s is plausible too "
                                       "(a cascade box around the aircraft and the jet bridge is 2x the aircraft; "
                                       "0.6: as any other frame)", low=0.2, high=0.6)
+    restart_extent_high: float = param(2.0, "static camera, a restart on a detector box over a stand already known "
+                                       "(the background kept from the track before), until the first silhouette "
+                                       "inside the usual 0.6-1.5x: one whose sides are up to this many times X̂'s is "
+                                       "plausible too (the stand cascade's box of an aircraft in low sun is often its "
+                                       "fuselage without the pale wings; not on a first start, where the start region "
+                                       "is unknown and rain streaks merge with the silhouette; 1.5: as any other "
+                                       "frame)", low=1.5, high=3.0)
     extent_rotation: float = param(0.0, "static camera: the measured rectangle is turned to the silhouette's "
                                    "principal axis, by at most this much per frame [rad] (0: off, the rectangle "
                                    "keeps X̂'s rotation; measured: follows the turn, but from the first polygon the "
@@ -405,6 +412,7 @@ class AffineParticleFilter:
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         self._unsized = False                         # restart_extent_low: started on a box of unknown size
+        self._known_stand = False                     # restart_extent_high: started with the background kept
         self._refit_sides = "box"                     # start_refit: rotated_in_box (box) or rotated_like_box (silhouette)
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
         self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
@@ -550,6 +558,7 @@ class AffineParticleFilter:
         self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
         self._shaped = not axis_aligned       # learn_rotation shaped: the start has the target's rotation
         self._unsized = axis_aligned and not refit     # restart_extent_low: a detector box's size is not known
+        self._known_stand = self._static_camera and background is not None    # restart_extent_high
         self._start_track = [(frame, state.copy())] if self._start_box is not None else []
         if self._static_camera and background is not None:
             self.background = background
@@ -626,7 +635,8 @@ class AffineParticleFilter:
             extent = foreground_extent(foreground, candidate, self.background.scale) or extent
         if _plausible(extent):
             self._unsized = False
-        elif not (self._unsized and _plausible(extent, self.config.restart_extent_low)):
+        elif not (self._unsized and _plausible(extent, self.config.restart_extent_low,
+                                               self.config.restart_extent_high if self._known_stand else 1.5)):
             self.extent_counts["implausible"] += 1
             return None
         measured = candidate @ extent.correction()
@@ -975,10 +985,10 @@ def rotated_like_box(box: np.ndarray, angle: float, aspect: float, max_angle: fl
     return out
 
 
-def _plausible(extent, low: float = 0.6) -> bool:
-    """A silhouette's rectangle the estimate may follow: sides ``low``-1.5x the estimate's, centre within 0.3
-    sides of its (not another object merged, not a partial silhouette)."""
-    return (low < extent.width < 1.5 and low < extent.height < 1.5
+def _plausible(extent, low: float = 0.6, high: float = 1.5) -> bool:
+    """A silhouette's rectangle the estimate may follow: sides ``low``-``high`` times the estimate's, centre within
+    0.3 sides of its (not another object merged, not a partial silhouette)."""
+    return (low < extent.width < high and low < extent.height < high
             and abs(extent.centre_u) < 0.3 and abs(extent.centre_v) < 0.3)
 
 
