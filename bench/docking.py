@@ -170,6 +170,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, no static-camera extent": {"extent_gain": 0.0},
     "ISPF, no target motion": {"motion_gain": 0.0},
     "ISPF, extent turned to the silhouette's axis": {"extent_rotation": 0.05},
+    "ISPF, X̂ not turned to the silhouette's axis (rotation_gain 0)": {"rotation_gain": 0.0},
     "ISPF, per-pixel flicker threshold": {"flicker_gain": 2.0},
     "ISPF, aspect pull 0.03": {"aspect_pull": 0.03},
     "ISPF, session-6 shape (aspect to the start box's, no rotation pull, extent on a still target)":

@@ -169,10 +169,11 @@ class FilterConfig(AppearanceConfig):
                               "prior", low=0.0, high=1.0)
     rotation_pull: float = param(0.03, "shape_prior silhouette: fraction of a particle's rotation pulled to the "
                                  "silhouette's major axis per frame (0: off)", low=0.0, high=1.0)
-    rotation_gain: float = param(0.0, "shape_prior silhouette: fraction of this frame's angle between X̂'s u axis and "
+    rotation_gain: float = param(0.15, "shape_prior silhouette: fraction of this frame's angle between X̂'s u axis and "
                                  "the silhouette's major axis by which X̂ (and the particles) are turned about X̂'s "
                                  "centre, on the frames the silhouette is measured (0: off, only the particles' "
-                                 "rotation_pull toward the running prior)", low=0.0, high=1.0)
+                                 "rotation_pull toward the running prior; tuning seeds, loose box: 0.1, 0.15, 0.25 "
+                                 "gave 150 f mean AUC 0.733, 0.737, 0.724 against 0.724 off)", low=0.0, high=1.0)
     learn_rotation: str = param("shaped", "shape_prior silhouette: the rotation at which the appearance model and the "
                                 "estimator learn a frame (step 8): estimate = X̂'s own (the model learns X̂'s rotation "
                                 "error and then prefers it: from the first polygon X̂ stayed 10-12 deg turned to the stop, "
@@ -613,7 +614,8 @@ class AffineParticleFilter:
         """The step ``exp(extent_gain · log C)`` that moves X̂ toward the foreground's rectangle C
         (static_background.py), or None: no trusted foreground, no silhouette, or an implausible one
         (sides outside 0.6-1.5x the estimate's, or the centre more than 0.3 sides off: another object
-        merged, a partial silhouette)."""
+        merged, a partial silhouette). After a restart on a box of unknown size, until the first silhouette in
+        that range, sides down to ``restart_extent_low`` and, over a known stand, up to ``restart_extent_high``."""
         foreground = self.background.foreground
         if foreground is None:
             self.extent_counts["moving" if self.background.camera_moving
