@@ -638,7 +638,8 @@ class AffineParticleFilter:
         if _plausible(extent):
             self._unsized = False
         elif not (self._unsized and _plausible(extent, self.config.restart_extent_low,
-                                               self.config.restart_extent_high if self._known_stand else 1.5)):
+                                               self.config.restart_extent_high if self._known_stand
+                                               else PLAUSIBLE_HIGH)):
             self.extent_counts["implausible"] += 1
             return None
         measured = candidate @ extent.correction()
@@ -987,7 +988,10 @@ def rotated_like_box(box: np.ndarray, angle: float, aspect: float, max_angle: fl
     return out
 
 
-def _plausible(extent, low: float = 0.6, high: float = 1.5) -> bool:
+PLAUSIBLE_LOW, PLAUSIBLE_HIGH = 0.6, 1.5   # the usual bounds of a silhouette's sides [X̂'s sides]
+
+
+def _plausible(extent, low: float = PLAUSIBLE_LOW, high: float = PLAUSIBLE_HIGH) -> bool:
     """A silhouette's rectangle the estimate may follow: sides ``low``-``high`` times the estimate's, centre within
     0.3 sides of its (not another object merged, not a partial silhouette)."""
     return (low < extent.width < high and low < extent.height < high
