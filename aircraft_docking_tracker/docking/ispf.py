@@ -412,8 +412,9 @@ class AffineParticleFilter:
                                            relight=config.background_relight, persist=config.foreground_frames)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
-        self._unsized = False                         # restart_extent_low: started on a box of unknown size
-        self._known_stand = False                     # restart_extent_high: started with the background kept
+        # restart_extent_low/high: a restart on a box of unknown size, the silhouette's wider plausible bounds until
+        # the first one inside the usual (None: the usual bounds)
+        self._restart_bounds: tuple[float, float] | None = None
         self._refit_sides = "box"                     # start_refit: rotated_in_box (box) or rotated_like_box (silhouette)
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
         self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
@@ -558,8 +559,10 @@ class AffineParticleFilter:
         axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
         self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
         self._shaped = not axis_aligned       # learn_rotation shaped: the start has the target's rotation
-        self._unsized = axis_aligned and not refit     # restart_extent_low: a detector box's size is not known
-        self._known_stand = self._static_camera and background is not None    # restart_extent_high
+        known_stand = self._static_camera and background is not None    # the background kept from the track before
+        self._restart_bounds = ((self.config.restart_extent_low,
+                                 self.config.restart_extent_high if known_stand else PLAUSIBLE_HIGH)
+                                if axis_aligned and not refit else None)   # a detector box's size is not known
         self._start_track = [(frame, state.copy())] if self._start_box is not None else []
         if self._static_camera and background is not None:
             self.background = background
@@ -636,10 +639,8 @@ class AffineParticleFilter:
             candidate = from_chart(q)[0]
             extent = foreground_extent(foreground, candidate, self.background.scale) or extent
         if _plausible(extent):
-            self._unsized = False
-        elif not (self._unsized and _plausible(extent, self.config.restart_extent_low,
-                                               self.config.restart_extent_high if self._known_stand
-                                               else PLAUSIBLE_HIGH)):
+            self._restart_bounds = None
+        elif not (self._restart_bounds and _plausible(extent, *self._restart_bounds)):
             self.extent_counts["implausible"] += 1
             return None
         measured = candidate @ extent.correction()
