@@ -110,6 +110,12 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   starts again there: a new model from the first frames' patches under the track so changed, the
   particles at X̂ so changed (``_start_refit``). Not when the silhouette has no axis (``start_min_elongation``), when
   much moved outside the box too (``start_max_outside``: rain, a moving camera), or on a moving camera.
+  ``start_axis`` hull (session 19): the silhouette is read on the frames themselves (at most ``start_width`` px
+  wide), in colour when they are BGR, and its axis is that of the convex hull of its largest piece; on the grey
+  working level the rain approaches' thin wings were lost and the filled fuselage and the streaks set the axis
+  (12-60 deg off), so every rain start kept the level box. Not when the hull covers less than ``start_min_fill``
+  of the box (an aircraft behind the bridge shows a wing tip). The filter tracks in grey: a BGR frame is
+  converted on entry, its colour kept only for the first ``start_refit`` frames.
 * The frame is sampled from the pyramid level (``cv2.pyrDown``) where the target is about
   ``pyramid_ratio`` template sizes large, so big targets cost no more than small ones.
 """
@@ -283,6 +289,18 @@ class FilterConfig(AppearanceConfig):
                              "box) and the appearance model starts again there (0: off; >= 3)", low=0, high=30)
     start_min_elongation: float = param(1.5, "start_refit: the least elongation (major / minor standard deviation) "
                                         "of the start silhouette that gives an axis", low=1.0, high=10.0)
+    start_axis: str = param("hull", "start_refit: the start silhouette's axis. hull: on the frames (at most "
+                            "start_width px wide, in colour when the frames are BGR), the principal axis of the convex "
+                            "hull of the silhouette's largest piece (the wing tips and the fin set it, not the filled "
+                            "fuselage; rain streaks apart from it are left out); mask: on the static background's grey "
+                            "level, the principal axis of every moved pixel (session 9)", choices=("hull", "mask"))
+    start_width: int = param(640, "start_axis hull: frames wider than this are halved (cv2.pyrDown) until they are "
+                             "not (the cost of the start silhouette bounded at any camera resolution)",
+                             low=64, high=8192)
+    start_min_fill: float = param(0.15, "start_axis hull: no re-fit when the hull covers less than this fraction of "
+                                  "the start box (an aircraft hidden behind the bridge or a vehicle shows a piece: "
+                                  "0.01-0.10 on the tuning approaches, an aircraft in view 0.22-0.40)",
+                                  low=0.0, high=1.0)
     start_max_outside: float = param(0.05, "start_refit: no re-fit when more than this fraction of the pixels "
                                      "outside the start region moved as much (rain, a moving camera)",
                                      low=0.0, high=1.0)
@@ -407,7 +425,8 @@ class AffineParticleFilter:
                                            max_outside=config.max_foreground_outside,
                                            flicker_gain=config.flicker_gain, motion=config.motion_gain > 0,
                                            max_stale=config.max_stale, stale_window=config.stale_window,
-                                           keep_first=config.start_refit + 1 if config.start_refit else 0,
+                                           keep_first=(config.start_refit + 1 if config.start_refit
+                                                       and config.start_axis == "mask" else 0),
                                            row_offset=config.background_rows, freeze=config.background_freeze,
                                            relight=config.background_relight, persist=config.foreground_frames)
         self._frames = 0                 # frames stepped since the start
@@ -417,8 +436,9 @@ class AffineParticleFilter:
         self._restart_bounds: tuple[float, float] | None = None
         self._refit_sides = "box"                     # start_refit: rotated_in_box (box) or rotated_like_box (silhouette)
         self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
-        self.start_counts = {"refitted": 0, "no silhouette": 0, "no axis": 0, "outside": 0, "untrusted": 0,
-                             "invalid": 0}
+        self._start_frames: list[np.ndarray] = []     # start_axis hull: the frames since the start as given (colour)
+        self.start_counts = {"refitted": 0, "no silhouette": 0, "hidden": 0, "no axis": 0, "outside": 0,
+                             "untrusted": 0, "invalid": 0}
         self._still_run = 0                 # frames in a row the target was still (extent_still_after)
         self._shaped = False                # learn_rotation shaped: the track started on the target's rotation
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "filling": 0, "still": 0, "none": 0,
@@ -429,6 +449,24 @@ class AffineParticleFilter:
     def n_carried(self) -> int:
         """Particles carried from frame to frame (PF: its fixed count; ISPF: ΔN_0)."""
         return self.config.pf_particles
+
+    def _grey(self, frame: np.ndarray) -> np.ndarray:
+        """The grey frame the filter tracks in (a BGR frame converted; its colour serves only ``start_axis`` hull)."""
+        frame = np.asarray(frame)
+        if frame.ndim == 3 and frame.shape[2] == 3 and frame.size:
+            if self._start_box is not None and self.config.start_axis == "hull":
+                self._keep_start_frame(frame)
+            return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        if self._start_box is not None and self.config.start_axis == "hull" and frame.ndim == 2:
+            self._keep_start_frame(frame)
+        return frame
+
+    def _keep_start_frame(self, frame: np.ndarray) -> None:
+        """``start_axis`` hull: keep ``frame`` (at most ``start_width`` px wide) for the start silhouette."""
+        kept = np.array(frame)                        # a copy: the caller may reuse its buffer
+        while kept.shape[1] > self.config.start_width and min(kept.shape[:2]) >= 32:
+            kept = cv2.pyrDown(kept)
+        self._start_frames.append(kept)
 
     def _load(self, frame: np.ndarray, around: np.ndarray) -> None:
         """Keep the pyramid level of ``frame`` where the object ``around`` is ~pyramid_ratio templates."""
@@ -553,11 +591,13 @@ class AffineParticleFilter:
         turned rectangle's sides (box: :func:`rotated_in_box`; silhouette: :func:`rotated_like_box`)."""
         state = np.asarray(state, dtype=float)
         self._refit_sides = refit_sides
+        axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
+        self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
+        self._start_frames = []
+        frame = self._grey(frame)
         self._load(frame, state)
         self._initialise(state)
         self._frames, self._still_run = 0, 0
-        axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
-        self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
         self._shaped = not axis_aligned       # learn_rotation shaped: the start has the target's rotation
         known_stand = self._static_camera and background is not None    # the background kept from the track before
         self._restart_bounds = ((self.config.restart_extent_low,
@@ -594,6 +634,7 @@ class AffineParticleFilter:
         """Before the particles move: the frame's pyramid level and (static camera) its foreground."""
         if self.estimate is None:
             raise FrameError("filter stepped before start()")
+        frame = self._grey(frame)
         self._load(frame, self.estimate)
         if self._static_camera:
             self.background.observe(frame, self.estimate)
@@ -787,7 +828,7 @@ class AffineParticleFilter:
             self._start_track[-1] = (self._start_track[-1][0], estimate)
         if self._start_box is not None and self._frames >= self.config.start_refit:
             refitted = self._start_refit(estimate)
-            self._start_box, self._start_track = None, []
+            self._start_box, self._start_track, self._start_frames = None, [], []
             if refitted is not None:
                 estimate, score, states = refitted, float(self._score(refitted[None])[0][0]), refitted[None]
         untrusted = (self.config.extent_gain > 0 and self.background.foreground is None
@@ -825,12 +866,20 @@ class AffineParticleFilter:
         if not self._static_camera or self.background.foreground is None:
             self.start_counts["untrusted"] += 1
             return None
-        silhouette = start_silhouette(self.background.first, box, self.background.scale)
+        if cfg.start_axis == "hull":
+            frames = self._start_frames
+            scale = frames[0].shape[1] / self._frame_shape[1] if frames else 1.0
+            silhouette = start_silhouette(frames, box, scale, axis="hull", blur=3)
+        else:
+            silhouette = start_silhouette(self.background.first, box, self.background.scale)
         if silhouette is None:
             self.start_counts["no silhouette"] += 1
             return None
         if silhouette.outside > cfg.start_max_outside:
             self.start_counts["outside"] += 1
+            return None
+        if silhouette.fill < cfg.start_min_fill:
+            self.start_counts["hidden"] += 1
             return None
         if silhouette.elongation < cfg.start_min_elongation:
             self.start_counts["no axis"] += 1
