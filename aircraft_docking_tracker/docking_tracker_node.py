@@ -136,13 +136,13 @@ class DockingProcessor(MessageProcessor):
         self.tracker.request_start(points)
 
     def _image(self, msg):
-        from .images import to_bgr8, to_mono8  # noqa: PLC0415
+        from .images import to_mono8_or_bgr8  # noqa: PLC0415
         from .ros.markers import delete_all, polygon_image_marker, polygon_marker, text_marker  # noqa: PLC0415
         from .scenarios.messages import quad_to_polygon  # noqa: PLC0415
         from visualization_msgs.msg import MarkerArray  # noqa: PLC0415
 
-        grey = to_mono8(msg, self.node.max_image_pixels)
-        result = self.tracker.step(grey, self._fresh_detections(stamp_to_ns(msg.header.stamp)))
+        frame = to_mono8_or_bgr8(msg, self.node.max_image_pixels)      # tracked in grey; colour for the start re-fit
+        result = self.tracker.step(frame, self._fresh_detections(stamp_to_ns(msg.header.stamp)))
         self.last = result
         self.starts += int(result.started)
         shown = result.quad if result.state == TRACKING else np.full((4, 2), np.nan)
@@ -163,7 +163,10 @@ class DockingProcessor(MessageProcessor):
         if self.node.annotate_image:
             from .images import numpy_to_image  # noqa: PLC0415
 
-            drawn = draw_docking(to_bgr8(msg, self.node.max_image_pixels), result, self.node.max_drawn_particles)
+            import cv2  # noqa: PLC0415
+
+            bgr = frame if frame.ndim == 3 else cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+            drawn = draw_docking(bgr, result, self.node.max_drawn_particles)
             out.append(("docking/image", numpy_to_image(drawn, "bgr8", msg.header)))
         return out
 

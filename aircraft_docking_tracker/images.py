@@ -227,6 +227,14 @@ def to_mono8(msg, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
     return cv2.cvtColor(to_bgr8(msg, max_pixels), cv2.COLOR_BGR2GRAY)
 
 
+def to_mono8_or_bgr8(msg, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
+    """Any supported Image / CompressedImage with its colour if it has any: (H, W) uint8 grey for a grey raw
+    image, else (H, W, 3) uint8 BGR (Bayer images are demosaiced; a compressed image is decoded as ``to_bgr8``)."""
+    if not is_compressed(msg) and _layout(msg.encoding).channels == 1 and not msg.encoding.startswith("bayer_"):
+        return to_mono8(msg, max_pixels)
+    return to_bgr8(msg, max_pixels)
+
+
 def _decode_compressed(msg, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
     raw = bytes(msg.data)
     if not raw:

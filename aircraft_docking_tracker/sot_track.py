@@ -84,14 +84,14 @@ def open_sequence(path: str | Path) -> Sequence:
         gt = None
         if (path / "groundtruth_rect.txt").is_file():
             gt = read_sot_boxes(path / "groundtruth_rect.txt")[0]
-        frames = (_read_grey(f) for f in files)
+        frames = (_read_frame(f) for f in files)
         return Sequence(frames, len(files), gt, path.name,
                         files=[path, *files, path / "groundtruth_rect.txt"])
     raise SequenceError(f"{path}: not a frame folder, a video ({', '.join(VIDEO_SUFFIXES)}) or an .mcap bag")
 
 
-def _read_grey(path: Path) -> np.ndarray:
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+def _read_frame(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None:
         raise SequenceError(f"{path}: cannot be read as an image")
     return image
@@ -109,7 +109,7 @@ def _video_sequence(path: Path) -> Sequence:
                 ok, bgr = capture.read()
                 if not ok:
                     return
-                yield cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+                yield bgr
         finally:
             capture.release()
     return Sequence(frames(), count, None, path.stem, files=[path])
@@ -117,7 +117,7 @@ def _video_sequence(path: Path) -> Sequence:
 
 def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "ground_truth/polygon") -> Sequence:
     from .io.bag import BagError, BagReader, stamp_to_ns  # noqa: PLC0415
-    from .images import to_mono8  # noqa: PLC0415
+    from .images import to_mono8_or_bgr8  # noqa: PLC0415
     from .scenarios.messages import polygon_to_quad  # noqa: PLC0415
 
     reader = BagReader(path)
@@ -144,7 +144,7 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
 
     def frames() -> Iterator[np.ndarray]:
         for _, msg, _ in reader.ros_messages([topics[image_topic]]):
-            yield to_mono8(msg)
+            yield to_mono8_or_bgr8(msg)
     return Sequence(frames(), count, gt, path.stem, files=[*reader.files, reader.bag_path],
                     problem=lambda: reader.problem)
 
@@ -152,8 +152,8 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
 # --------------------------------------------------------------------------- the run
 def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int | None = None,
           progress: bool = True, desc: str = "sot_track", detections: Iterable | None = None) -> TrackRun:
-    """Run the docking tracker over grey ``frames`` from ``init`` (box, quadrilateral or state; None:
-    wait for a detection).
+    """Run the docking tracker over ``frames`` (grey, or BGR: tracked in grey) from ``init`` (box, quadrilateral or
+    state; None: wait for a detection).
 
     The first frame starts the filter; each later frame is one ``DockingTracker.step`` (timed
     alone: reading and decoding the frames are not in ``step_seconds``), given the frame's detection

@@ -178,6 +178,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, aspect pulled to the start box's (shape_prior start)": {"shape_prior": "start", "rotation_pull": 0.0},
     "ISPF, extent also on a still target": {"extent_still": "measure"},
     "ISPF, no start re-fit (start_refit 0)": {"start_refit": 0},
+    "ISPF, start silhouette's axis on the grey level (start_axis mask)": {"start_axis": "mask"},
     "ISPF, no detector override": {"override_after": 0},
     "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
     "ISPF, absolute update floor only (update_relative 0)": {"update_relative": 0.0},
@@ -215,7 +216,7 @@ def run_ours(seq: dict, overrides: dict, seed: int = 0, start: str = "box") -> d
     from aircraft_docking_tracker.docking.tracker import DockingConfig  # noqa: PLC0415
     from aircraft_docking_tracker.sot_track import track  # noqa: PLC0415
 
-    frames = (cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in seq["files"])
+    frames = (cv2.imread(f, cv2.IMREAD_COLOR) for f in seq["files"])
     stand, tables = {}, None
     if seq["kind"] != "real":
         stand = load_yaml_parameters(package_config_dir() / "stand_camera.yaml", "docking_tracker")

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker.images import (
-    ENCODINGS, ImageConversionError, image_to_numpy, numpy_to_compressed, numpy_to_image, to_bgr8, to_mono8)
+    ENCODINGS, ImageConversionError, image_to_numpy, numpy_to_compressed, numpy_to_image, to_bgr8, to_mono8,
+    to_mono8_or_bgr8)
 
 RNG = np.random.default_rng(0)
 BGR = RNG.integers(0, 256, size=(6, 8, 3), dtype=np.uint8)
@@ -30,6 +31,21 @@ def fake(array: np.ndarray, encoding: str, *, pad: int = 0, bigendian: bool = Fa
 @pytest.mark.parametrize("pad", [0, 5])
 def test_colour_encodings_give_the_same_bgr(encoding, make, pad):
     np.testing.assert_array_equal(to_bgr8(fake(make(), encoding, pad=pad)), BGR)
+
+
+def test_mono8_or_bgr8_keeps_a_grey_image_grey_and_a_colour_one_in_colour():
+    """What the docking node tracks: grey stays (H, W) as to_mono8 gives it, colour comes as to_bgr8's BGR (its
+    grey conversion is to_mono8's for 8-bit colour), a compressed image as to_bgr8 decodes it."""
+    grey = RNG.integers(0, 256, size=(5, 7), dtype=np.uint8)
+    np.testing.assert_array_equal(to_mono8_or_bgr8(fake(grey, "mono8")), grey)
+    for encoding, make in (("bgr8", BGR), ("rgb8", BGR[:, :, ::-1])):
+        frame = to_mono8_or_bgr8(fake(make, encoding, pad=3))
+        np.testing.assert_array_equal(frame, BGR)
+        np.testing.assert_array_equal(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), to_mono8(fake(make, encoding)))
+    bayer = to_mono8_or_bgr8(fake(RNG.integers(0, 256, size=(6, 8), dtype=np.uint8), "bayer_rggb8"))
+    assert bayer.shape == (6, 8, 3)
+    compressed = numpy_to_compressed(BGR, "png")
+    np.testing.assert_array_equal(to_mono8_or_bgr8(compressed), to_bgr8(compressed))
 
 
 def test_mono8_and_mono16_big_endian():
