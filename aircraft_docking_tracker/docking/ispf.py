@@ -113,9 +113,9 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   ``start_axis`` hull (session 19): the silhouette is read on the frames themselves (at most ``start_width`` px
   wide), in colour when they are BGR, and its axis is that of the convex hull of its largest piece; on the grey
   working level the rain approaches' thin wings were lost and the filled fuselage and the streaks set the axis
-  (12-60 deg off), so every rain start kept the level box. Not when the hull covers less than ``start_min_fill``
-  of the box (an aircraft behind the bridge shows a wing tip). The filter tracks in grey: a BGR frame is
-  converted on entry, its colour kept only for the first ``start_refit`` frames.
+  (20-64 deg off on 7 of the 10 tuning rain starts), so every rain start kept the level box. Not when the hull
+  covers less than ``start_min_fill`` of the box (an aircraft behind the bridge shows a wing tip). The filter
+  tracks in grey: a BGR frame is converted on entry, its colour kept only for the first ``start_refit`` frames.
 * The frame is sampled from the pyramid level (``cv2.pyrDown``) where the target is about
   ``pyramid_ratio`` template sizes large, so big targets cost no more than small ones.
 """

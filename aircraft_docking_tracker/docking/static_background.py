@@ -97,7 +97,7 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   in colour (a pixel's difference is its largest channel's: a painted wing at the ground's grey level), 3x3
   blurred, and the axis is that of the filled convex hull of the largest connected piece: the wing tips and the
   fin set it, not the filled fuselage, and rain streaks apart from the aircraft are left out. Tuning approaches
-  (first 6 frames): the rain starts' axes 1-10 deg off (12-62 on the grey level); ``fill``, the hull's area over
+  (first 6 frames): the rain starts' axes 1-10 deg off (20-64 on the grey level on 7 of 10); ``fill``, the hull's area over
   the start rectangle's, is 0.01-0.10 for an aircraft hidden behind the bridge, 0.22-0.40 in view.
 * **Extent** (:func:`foreground_extent`): ``F`` sampled on a grid covering ``extent`` times the
   estimate's template rectangle, in the estimate's template coordinates ``(u, v)``; threshold, close
