@@ -395,8 +395,8 @@ def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, 
     streaks apart from it. On BGR images a pixel's difference is the largest of its three channels'."""
     if len(images) < 4:
         return None
-    first = np.median(np.stack(images[:3]).astype(np.float32), axis=0)
-    last = np.median(np.stack(images[-3:]).astype(np.float32), axis=0)
+    first = _median_of_three(*(np.asarray(i, np.float32) for i in images[:3]))
+    last = _median_of_three(*(np.asarray(i, np.float32) for i in images[-3:]))
     shape = first.shape[:2]
     outside = state_mask(state, surround, shape, scale) == 0
     if outside.sum() < 100:
@@ -427,6 +427,11 @@ def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, 
     major, elongation = principal_axis(np.stack([xs, ys]).astype(float))
     angle = half_turn(float(np.arctan2(major[1], major[0])))
     return StartSilhouette(angle, elongation, float(moved[outside].mean()), int(len(xs)), fill)
+
+
+def _median_of_three(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The pixelwise median of three images (exactly ``np.median`` of their stack, ~20x faster)."""
+    return np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
 
 
 def principal_axis(points: np.ndarray) -> tuple[np.ndarray, float]:
