@@ -216,6 +216,9 @@ def test_bad_frames_are_refused():
         flt.step(np.zeros((0, 5), np.uint8))
     with pytest.raises(FrameError):
         flt.step(np.zeros((4, 4, 3, 2), np.uint8))
+    with pytest.raises(FrameError):
+        flt.step(np.zeros((4, 4, 4), np.uint8))                  # BGRA: grey or BGR only
+    flt.step(np.repeat(frame[..., None], 3, axis=2))             # BGR: tracked in its grey conversion
 
 
 def test_incremental_subspace_learns_a_low_rank_set():

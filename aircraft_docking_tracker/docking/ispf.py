@@ -133,7 +133,7 @@ from .static_background import StaticBackground, foreground_extent, half_turn, s
 
 
 class FrameError(ValueError):
-    """A frame the filter cannot use (not a non-empty 2-D grey image)."""
+    """A frame the filter cannot use (not a non-empty grey (H, W) or BGR (H, W, 3) image)."""
 
 
 @dataclass
@@ -472,7 +472,7 @@ class AffineParticleFilter:
         """Keep the pyramid level of ``frame`` where the object ``around`` is ~pyramid_ratio templates."""
         frame = np.asarray(frame)
         if frame.ndim != 2 or frame.size == 0:
-            raise FrameError(f"the filter needs a 2-D grey frame, got shape {frame.shape}")
+            raise FrameError(f"the filter needs a grey (H, W) or BGR (H, W, 3) frame, got shape {frame.shape}")
         sides = np.linalg.norm(around[:2, :2], axis=0)               # object width, height [px]
         ratio = min(sides[0] / self.config.template_width, sides[1] / self.config.template_height)
         level = int(np.clip(np.floor(np.log2(max(ratio / self.config.pyramid_ratio, 1.0))), 0, 6))
