@@ -97,8 +97,9 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   in colour (a pixel's difference is its largest channel's: a painted wing at the ground's grey level), 3x3
   blurred, and the axis is that of the filled convex hull of the largest connected piece: the wing tips and the
   fin set it, not the filled fuselage, and rain streaks apart from the aircraft are left out. Tuning approaches
-  (first 6 frames): the rain starts' axes 1-10 deg off (20-64 on the grey level on 7 of 10); ``fill``, the hull's area over
-  the start rectangle's, is 0.01-0.10 for an aircraft hidden behind the bridge, 0.22-0.40 in view.
+  (first 6 frames): the rain starts' axes 1-10 deg off (20-64 on the grey level on 7 of 10); ``fill``, the
+  hull's area over the start rectangle's, is 0.01-0.10 for an aircraft hidden behind the bridge, 0.22-0.40 in
+  view.
 * **Extent** (:func:`foreground_extent`): ``F`` sampled on a grid covering ``extent`` times the
   estimate's template rectangle, in the estimate's template coordinates ``(u, v)``; threshold, close
   3x3, the connected components that overlap the rectangle; their bounding box ``[u0, u1] x [v0, v1]``
@@ -391,7 +392,7 @@ def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, 
 
     ``axis`` mask: the principal axis of every moved pixel in the region (closed 5x5); hull: of the filled convex
     hull of the largest connected piece, so that the wing tips and the fin set the axis and not the filled blob
-    of the fuselage (in rain it is most of the mask: 12-36 deg off in 6 of 7 tuning rain approaches), nor the rain
+    of the fuselage (in rain most of the mask: session 16, 12-36 deg off in 6 of 7 tuning rain starts), nor the rain
     streaks apart from it. On BGR images a pixel's difference is the largest of its three channels'."""
     if len(images) < 4:
         return None
@@ -417,7 +418,7 @@ def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, 
         return None
     fill = 1.0
     if axis == "hull":
-        count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        _, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
         largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
         piece = np.stack(np.nonzero(labels == largest)[::-1], axis=1).astype(np.int32)
         hull = np.zeros_like(mask)
