@@ -200,7 +200,14 @@ def to_bgr8(msg, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
     if layout.to_bgr is not None:
         if msg.encoding.startswith("bayer_") and pixels.dtype != np.uint8:
             pixels = _scale_to_8bit(pixels)
-        return np.ascontiguousarray(_scale_to_8bit(cv2.cvtColor(pixels, layout.to_bgr)))
+        if layout.channels == 2 and pixels.shape[1] % 2:
+            raise ImageConversionError(f"{msg.encoding}: a 4:2:2 image needs an even width (two pixels share one "
+                                       f"chroma pair), got {pixels.shape[1]}")
+        try:
+            return np.ascontiguousarray(_scale_to_8bit(cv2.cvtColor(pixels, layout.to_bgr)))
+        except cv2.error as exc:
+            raise ImageConversionError(f"{msg.encoding} ({pixels.shape[1]}x{pixels.shape[0]}) could not be "
+                                       f"converted to BGR: {str(exc).strip().splitlines()[-1]}") from None
     pixels = _scale_to_8bit(pixels)
     if pixels.ndim == 2:
         return cv2.cvtColor(pixels, cv2.COLOR_GRAY2BGR)

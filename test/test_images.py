@@ -48,6 +48,18 @@ def test_mono8_or_bgr8_keeps_a_grey_image_grey_and_a_colour_one_in_colour():
     np.testing.assert_array_equal(to_mono8_or_bgr8(compressed), to_bgr8(compressed))
 
 
+def test_an_odd_width_422_image_has_grey_but_no_colour():
+    """4:2:2 packs two pixels per chroma pair: at an odd width its luma is still grey, its colour is a clear
+    conversion error, not OpenCV's assertion (the fuzz test found it through the docking node)."""
+    packed = RNG.integers(0, 256, size=(4, 5, 2), dtype=np.uint8)
+    for encoding in ("yuv422", "yuv422_yuy2"):
+        assert to_mono8(fake(packed, encoding)).shape == (4, 5)
+        with pytest.raises(ImageConversionError, match="even width"):
+            to_bgr8(fake(packed, encoding))
+        with pytest.raises(ImageConversionError, match="even width"):
+            to_mono8_or_bgr8(fake(packed, encoding))
+
+
 def test_mono8_and_mono16_big_endian():
     grey = RNG.integers(0, 65536, size=(5, 7), dtype=np.uint16)
     for big in (False, True):
