@@ -396,8 +396,8 @@ def start_silhouette(images: list[np.ndarray], state: np.ndarray, scale: float, 
     streaks apart from it. On BGR images a pixel's difference is the largest of its three channels'."""
     if len(images) < 4:
         return None
-    first = _median_of_three(*(np.asarray(i, np.float32) for i in images[:3]))
-    last = _median_of_three(*(np.asarray(i, np.float32) for i in images[-3:]))
+    first = _median_of_three(*(np.asarray(i) for i in images[:3])).astype(np.float32)    # exact in any dtype
+    last = _median_of_three(*(np.asarray(i) for i in images[-3:])).astype(np.float32)
     shape = first.shape[:2]
     outside = state_mask(state, surround, shape, scale) == 0
     if outside.sum() < 100:
