@@ -435,8 +435,8 @@ class AffineParticleFilter:
         # the first one inside the usual (None: the usual bounds)
         self._restart_bounds: tuple[float, float] | None = None
         self._refit_sides = "box"                     # start_refit: rotated_in_box (box) or rotated_like_box (silhouette)
-        self._start_track: list[tuple[np.ndarray, np.ndarray]] = []   # start_refit: (frame, X̂) since the start
-        self._start_frames: list[np.ndarray] = []     # start_axis hull: the frames since the start as given (colour)
+        # start_refit: (frame as given, grey or BGR; X̂) since the start
+        self._start_track: list[tuple[np.ndarray, np.ndarray]] = []
         self.start_counts = {"refitted": 0, "no silhouette": 0, "hidden": 0, "no axis": 0, "outside": 0,
                              "untrusted": 0, "invalid": 0}
         self._still_run = 0                 # frames in a row the target was still (extent_still_after)
@@ -450,23 +450,13 @@ class AffineParticleFilter:
         """Particles carried from frame to frame (PF: its fixed count; ISPF: ΔN_0)."""
         return self.config.pf_particles
 
-    def _grey(self, frame: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _grey(frame: np.ndarray) -> np.ndarray:
         """The grey frame the filter tracks in (a BGR frame converted; its colour serves only ``start_axis`` hull)."""
         frame = np.asarray(frame)
         if frame.ndim == 3 and frame.shape[2] == 3 and frame.size:
-            if self._start_box is not None and self.config.start_axis == "hull":
-                self._keep_start_frame(frame)
             return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-        if self._start_box is not None and self.config.start_axis == "hull" and frame.ndim == 2:
-            self._keep_start_frame(frame)
         return frame
-
-    def _keep_start_frame(self, frame: np.ndarray) -> None:
-        """``start_axis`` hull: keep ``frame`` (at most ``start_width`` px wide) for the start silhouette."""
-        kept = np.array(frame)                        # a copy: the caller may reuse its buffer
-        while kept.shape[1] > self.config.start_width and min(kept.shape[:2]) >= 32:
-            kept = cv2.pyrDown(kept)
-        self._start_frames.append(kept)
 
     def _load(self, frame: np.ndarray, around: np.ndarray) -> None:
         """Keep the pyramid level of ``frame`` where the object ``around`` is ~pyramid_ratio templates."""
@@ -593,8 +583,7 @@ class AffineParticleFilter:
         self._refit_sides = refit_sides
         axis_aligned = state[0, 1] == 0 and state[1, 0] == 0 and state[0, 0] > 0 and state[1, 1] > 0
         self._start_box = state.copy() if axis_aligned and refit and self.config.start_refit > 0 else None
-        self._start_frames = []
-        frame = self._grey(frame)
+        given, frame = frame, self._grey(frame)
         self._load(frame, state)
         self._initialise(state)
         self._frames, self._still_run = 0, 0
@@ -603,7 +592,7 @@ class AffineParticleFilter:
         self._restart_bounds = ((self.config.restart_extent_low,
                                  self.config.restart_extent_high if known_stand else PLAUSIBLE_HIGH)
                                 if axis_aligned and not refit else None)   # a detector box's size is not known
-        self._start_track = [(frame, state.copy())] if self._start_box is not None else []
+        self._start_track = [(given, state.copy())] if self._start_box is not None else []
         if self._static_camera and background is not None:
             self.background = background
             self.background.restart(frame, state)
@@ -634,12 +623,12 @@ class AffineParticleFilter:
         """Before the particles move: the frame's pyramid level and (static camera) its foreground."""
         if self.estimate is None:
             raise FrameError("filter stepped before start()")
-        frame = self._grey(frame)
+        given, frame = frame, self._grey(frame)
         self._load(frame, self.estimate)
         if self._static_camera:
             self.background.observe(frame, self.estimate)
         if self._start_box is not None:
-            self._start_track.append((frame, None))
+            self._start_track.append((given, None))
 
     def _silhouette(self, foreground: np.ndarray, estimate: np.ndarray):
         """The foreground's rectangle around X̂ (static_background.foreground_extent) on the grid of 1.6 X̂, or,
@@ -828,7 +817,7 @@ class AffineParticleFilter:
             self._start_track[-1] = (self._start_track[-1][0], estimate)
         if self._start_box is not None and self._frames >= self.config.start_refit:
             refitted = self._start_refit(estimate)
-            self._start_box, self._start_track, self._start_frames = None, [], []
+            self._start_box, self._start_track = None, []
             if refitted is not None:
                 estimate, score, states = refitted, float(self._score(refitted[None])[0][0]), refitted[None]
         untrusted = (self.config.extent_gain > 0 and self.background.foreground is None
@@ -867,8 +856,10 @@ class AffineParticleFilter:
             self.start_counts["untrusted"] += 1
             return None
         if cfg.start_axis == "hull":
-            frames = self._start_frames
-            scale = frames[0].shape[1] / self._frame_shape[1] if frames else 1.0
+            frames = [np.asarray(frame) for frame, _ in self._start_track]
+            for _ in range(int(np.ceil(np.log2(max(frames[0].shape[1] / cfg.start_width, 1.0))))):
+                frames = [cv2.pyrDown(frame) for frame in frames]       # at most start_width px wide
+            scale = frames[0].shape[1] / self._frame_shape[1]
             silhouette = start_silhouette(frames, box, scale, axis="hull", blur=3)
         else:
             silhouette = start_silhouette(self.background.first, box, self.background.scale)
@@ -903,7 +894,7 @@ class AffineParticleFilter:
         current = self._image, self._level, self._frame_shape
         patches = []
         for frame, state in self._start_track:        # the frames so far under the re-fitted track
-            self._load(frame, state @ change)
+            self._load(self._grey(frame), state @ change)
             patches.append(self._observe((state @ change)[None]))
         self._image, self._level, self._frame_shape = current
         self._initialise(moved, np.concatenate(patches))
