@@ -174,7 +174,8 @@ def test_status_reports_the_static_camera_extent_counts():
     # started from an axis-aligned box: the start re-fit is tried once, after start_refit frames, and says how it went
     starts = {k: v for k, v in status.items() if k.startswith("start re-fit ")}
     assert set(starts) == {f"start re-fit {name}" for name in
-                           ("refitted", "no silhouette", "hidden", "no axis", "outside", "untrusted", "invalid")}
+                           ("refitted", "no silhouette", "hidden", "no axis", "outside", "moved", "untrusted",
+                            "invalid")}
     assert sum(starts.values()) == 1
 
 
