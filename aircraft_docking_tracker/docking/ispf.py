@@ -825,6 +825,7 @@ class AffineParticleFilter:
         self._frames += 1
         if self._start_box is not None and self._start_track:
             self._start_track[-1] = (self._start_track[-1][0], estimate, updated)
+        used = len(states)                # the particles this frame used (a re-fit below leaves one state)
         if self._start_box is not None and self._frames >= self.config.start_refit:
             refitted = self._start_refit(estimate)
             self._start_box, self._start_track = None, []
@@ -832,7 +833,7 @@ class AffineParticleFilter:
                 estimate, score, states = refitted, float(self._score(refitted[None])[0][0]), refitted[None]
         untrusted = (self.config.extent_gain > 0 and self.background.foreground is None
                      and not self.background.camera_moving)
-        return FrameResult(estimate, score, len(states), bool(updated), states, correction is not None, untrusted)
+        return FrameResult(estimate, score, used, bool(updated), states, correction is not None, untrusted)
 
     def _update_floor(self) -> float:
         """The guarded update's floor on Ŝ: ``update_min_score``, or with ``update_relative`` k > 0, on a frame no still
