@@ -284,6 +284,12 @@ class FilterConfig(AppearanceConfig):
                                     "the first; measured at 8: no better, docs/docking_tracker.md)", low=0, high=100)
     extent_max_drop: float = param(0.1, "static camera: a correction that lowers Ŝ by more than this is refused "
                                    "(a target the foreground does not segment as a whole)", low=0.0, high=1.0)
+    extent_small_share: float = param(0.03, "static camera: a piece of the silhouette under a tenth of the largest "
+                                      "(a fin fading into the glare, a wing broken by rain, a rain speck) that "
+                                      "overlaps X̂'s surroundings by at least this fraction of the largest counts "
+                                      "with its cells inside X̂'s rectangle only: it may hold the extent at X̂'s size, "
+                                      "never widen it (0: off, such pieces dropped as before session 20)",
+                                      low=0.0, high=0.1)
     start_refit: int = param(5, "static camera, a start from an axis-aligned box (a loose detector box): after this "
                              "many frames the start is re-fitted to the silhouette of what moved inside the box (its "
                              "major axis; scale and aspect so that the turned rectangle's bounding box is the start "
@@ -647,10 +653,11 @@ class AffineParticleFilter:
         axes = self.config.extent_axes
         if axes == "prior":
             axes = "estimate" if self._prior_rotation is None else float(self._prior_rotation)
-        extent = foreground_extent(foreground, estimate, self.background.scale, axes=axes)
+        small = self.config.extent_small_share
+        extent = foreground_extent(foreground, estimate, self.background.scale, axes=axes, small_share=small)
         if extent is None and self.config.extent_wide > 1.6:
             extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide,
-                                       axes=axes)
+                                       axes=axes, small_share=small)
         return extent
 
     def _extent_correction(self, estimate: np.ndarray) -> np.ndarray | None:
@@ -677,7 +684,8 @@ class AffineParticleFilter:
             q = to_chart(estimate[None])
             q[0, 4] += float(np.clip(extent.axis_angle, -self.config.extent_rotation, self.config.extent_rotation))
             candidate = from_chart(q)[0]
-            extent = foreground_extent(foreground, candidate, self.background.scale) or extent
+            extent = foreground_extent(foreground, candidate, self.background.scale,
+                                       small_share=self.config.extent_small_share) or extent
         if _plausible(extent):
             self._restart_bounds = None
         elif not (self._restart_bounds and _plausible(extent, *self._restart_bounds)):

@@ -102,7 +102,8 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   view.
 * **Extent** (:func:`foreground_extent`): ``F`` sampled on a grid covering ``extent`` times the
   estimate's template rectangle, in the estimate's template coordinates ``(u, v)``; threshold, close
-  3x3, the connected components that overlap the rectangle; their bounding box ``[u0, u1] x [v0, v1]``
+  3x3, the connected components that overlap the rectangle (a small one, ``small_share``, only inside the
+  estimate's rectangle: it holds the extent, it cannot widen it); their bounding box ``[u0, u1] x [v0, v1]``
   is the measured rectangle (a silhouette that reaches the grid's border is not measured: it is
   merged with something larger than the target), with the principal axis of its cells in the image
   (for ``extent_rotation`` in ``ispf.py``). With ``axes="silhouette"`` (``extent_axes`` in ``ispf.py``, off:
@@ -125,6 +126,9 @@ from . import affine_group as ag
 
 GRID_SIDE = 64          # samples per side of the extent grid
 PIECES_WITHIN = 0.8     # the silhouette's pieces kept: those within this half-side of X̂'s centre [X̂'s sides]
+PIECE_SHARE = 0.1       # ... and overlapping that square by at least this fraction of the largest overlap (a
+                        # smaller piece: only with small_share, and only inside X̂'s rectangle)
+EXTENT_CLOSE = 3        # the closing joining the silhouette's cells on the extent grid [cells]
 NOISE_FLOOR = 1.0       # grey levels: a smaller mean frame-to-frame change is taken as this (camera_moving)
 
 
@@ -463,7 +467,7 @@ def row_offsets(signed: np.ndarray, outside: np.ndarray, min_count: int = 16, ma
 
 def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, extent: float = 1.6,
                       threshold: float = 0.5, min_fill: float = 0.02, axes: str | float = "estimate",
-                      min_elongation: float = 1.15) -> Extent | None:
+                      min_elongation: float = 1.15, small_share: float = 0.0) -> Extent | None:
     """The foreground's rectangle in the template frame of ``state`` (module docstring), or None.
 
     ``foreground`` is F at ``scale`` times the frame's size; ``extent`` how far around the state's
@@ -474,7 +478,14 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
     silhouette has an axis (elongation at least ``min_elongation``; else as estimate); a number: the sides along
     the axis at that image angle [rad] (a running average of the silhouette's axis) and its normal.
     The silhouette is the connected pieces (after a 3-cell closing) that overlap the square of half-side
-    ``PIECES_WITHIN`` about X̂'s centre by at least a tenth of the largest overlap (rain specks are smaller).
+    ``PIECES_WITHIN`` about X̂'s centre by at least a tenth of the largest overlap (rain specks are smaller),
+    and with ``small_share`` > 0 the cells inside X̂'s own rectangle of the smaller pieces that overlap it by at
+    least ``small_share`` of the largest: such a piece may keep the rectangle as large as X̂, never make it
+    larger. Why (session 20): a fin fading into a low sun's glare, or a thin wing broken by rain into pieces,
+    is 4-10 % of the fuselage's piece; dropped, the extent measured the fuselage alone and pulled X̂ down to it,
+    frame after frame (tuning 114, low sun: X̂'s height 1.04 -> 0.55 of the truth's; held out 213, rain: its
+    width 0.57). Kept everywhere (the share 0.03 for every piece), rain specks far out widened it instead
+    (tuning 107, 116, 119: -0.03 to -0.16 a run).
     Why not X̂'s own rectangle (0.5, until session 15): rain breaks a thin wing from the fuselage, a piece
     outside a too narrow X̂ was dropped, the extent measured X̂'s own width and X̂ stayed narrow (tuning
     113, 119: log aspect -0.7 at the stop, IoU 0.47).
@@ -488,7 +499,8 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
     maps = affine @ grid
     patch = cv2.remap(foreground, maps[0].reshape(n, n), maps[1].reshape(n, n), cv2.INTER_LINEAR,
                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    binary = cv2.morphologyEx((patch > threshold).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    binary = cv2.morphologyEx((patch > threshold).astype(np.uint8), cv2.MORPH_CLOSE,
+                              np.ones((EXTENT_CLOSE, EXTENT_CLOSE), np.uint8))
     count, labels = cv2.connectedComponents(binary, connectivity=8)
     inner = (np.abs(uu) < 0.5) & (np.abs(vv) < 0.5)
     near = (np.abs(uu) < PIECES_WITHIN) & (np.abs(vv) < PIECES_WITHIN)
@@ -496,9 +508,13 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
         return None
     overlap = np.bincount(labels[near], minlength=count)
     overlap[0] = 0
-    keep = np.flatnonzero(overlap >= 0.1 * overlap.max())
+    keep = np.flatnonzero(overlap >= PIECE_SHARE * overlap.max())
     keep = keep[keep > 0]
-    ys, xs = np.nonzero(np.isin(labels, keep))
+    kept = np.isin(labels, keep)
+    if small_share > 0:
+        small = np.flatnonzero((overlap >= small_share * overlap.max()) & (overlap < PIECE_SHARE * overlap.max()))
+        kept |= np.isin(labels, small[small > 0]) & inner
+    ys, xs = np.nonzero(kept)
     if len(xs) < min_fill * inner.sum():
         return None
     if xs.min() == 0 or ys.min() == 0 or xs.max() == n - 1 or ys.max() == n - 1:
