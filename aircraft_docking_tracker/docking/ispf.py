@@ -130,7 +130,7 @@ import numpy as np
 from . import affine_group as ag
 from .appearance import AppearanceConfig, ObservationModel, PoseEstimator
 from ..config import ConfigError, param
-from .static_background import StaticBackground, foreground_extent, half_turn, start_silhouette
+from .static_background import StaticBackground, foreground_extent, half_turn, start_silhouette, state_mask
 
 
 class FrameError(ValueError):
@@ -494,6 +494,16 @@ class AffineParticleFilter:
     def _static_camera(self) -> bool:
         """Whether the static-camera model (static_background.py) runs: the extent or the motion prior is on."""
         return self.config.extent_gain > 0 or self.config.motion_gain > 0
+
+    def foreground_share(self, box) -> float | None:
+        """The fraction of the axis-aligned ``box`` (x, y, w, h, frame pixels) that is foreground (F > 0.5) on the
+        last frame; None when no foreground was measured (no static-camera model, a moving camera, an untrusted
+        frame). The detector's override asks it (``override_moving``, docking/tracker.py)."""
+        foreground = self.background.foreground if self._static_camera else None
+        if foreground is None:
+            return None
+        inside = state_mask(ag.from_box(*box), 1.0, foreground.shape, self.background.scale) > 0
+        return float((foreground[inside] > 0.5).mean()) if inside.any() else 0.0
 
     @property
     def _measured_motion(self) -> np.ndarray | None:

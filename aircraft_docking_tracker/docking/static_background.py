@@ -159,18 +159,6 @@ class Extent:
         return np.array([[self.width, 0.0, self.centre_u], [0.0, self.height, self.centre_v], [0.0, 0.0, 1.0]])
 
 
-def foreground_share(foreground: np.ndarray, box, scale: float) -> float:
-    """The fraction of the axis-aligned ``box`` (x, y, w, h in frame pixels) that is foreground (F > 0.5), F at
-    ``scale`` times the frame's size; 0 for a box outside it."""
-    x, y, w, h = (float(v) * scale for v in box)
-    rows, cols = foreground.shape[:2]
-    x0, y0 = int(np.clip(np.floor(x), 0, cols)), int(np.clip(np.floor(y), 0, rows))
-    x1, y1 = int(np.clip(np.ceil(x + w), 0, cols)), int(np.clip(np.ceil(y + h), 0, rows))
-    if x1 <= x0 or y1 <= y0:
-        return 0.0
-    return float((foreground[y0:y1, x0:x1] > 0.5).mean())
-
-
 def _level_image(frame: np.ndarray, level: int) -> np.ndarray:
     image = np.asarray(frame, dtype=np.float32)
     for _ in range(level):

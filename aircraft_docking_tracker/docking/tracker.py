@@ -44,7 +44,6 @@ from ..config import ConfigError, param
 from ..geometry import box_iou, centres_agree
 from .ispf import FilterConfig, make_filter
 from ..object_table import table_boxes
-from .static_background import foreground_share
 
 TRACKING, LOST, WAITING = 0, 1, 2
 STATE_NAMES = {TRACKING: "tracking", LOST: "lost", WAITING: "waiting"}
@@ -293,10 +292,8 @@ class DockingTracker:
         self._away, self._away_box = _run_at(self._away, self._away_box, best), best
         if self._away < cfg.override_after:
             return None
-        flt = self.filter
-        foreground = flt.background.foreground if flt._static_camera else None
-        if (cfg.override_moving > 0 and foreground is not None
-                and foreground_share(foreground, best, flt.background.scale) < cfg.override_moving):
+        share = self.filter.foreground_share(best) if cfg.override_moving > 0 else None
+        if share is not None and share < cfg.override_moving:
             self.overrides_refused += 1
             return None
         return best
