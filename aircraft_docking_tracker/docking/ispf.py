@@ -106,7 +106,9 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   head-on), because the start region is unknown to the static background for the first ~10 frames and the
   learnt model then refused the silhouette's corrections. After ``start_refit`` frames the silhouette of what
   moved inside the box (``static_background.start_silhouette``) gives the aircraft's axis; the box is taken
-  for the turned rectangle's bounding box, which gives its sides (:func:`rotated_in_box`), and the filter
+  for the turned rectangle's bounding box, which gives its sides (:func:`rotated_in_box`; session 21: beyond
+  its 40 deg, where a near-square box fits rectangles of any shape, the silhouette's elongation gives them,
+  :func:`rotated_like_box`: rain starts turned 29-37 deg whose hull read 40-45 deg kept the level box), and the filter
   starts again there: a new model from the first frames' patches under the track so changed, the
   particles at X̂ so changed (``_start_refit``). Not when X̂ has moved more than ``start_max_motion`` box sizes (the
   silhouette is then the target's trail), when the silhouette has no axis (``start_min_elongation``), when
@@ -873,7 +875,8 @@ class AffineParticleFilter:
         The silhouette of what moved inside the axis-aligned start box over the first frames gives the target's
         axis; the template's u axis is whichever of its axes is nearer the box's. The box is taken for the
         turned rectangle's bounding box (what a loose detector box is), which fixes the rectangle's sides
-        (:func:`rotated_in_box`); the change from the start box to it is applied to X̂ (which has followed the
+        (:func:`rotated_in_box`; beyond its 40 deg, where a near-square box holds rectangles of many shapes, the sides
+        of the silhouette's elongation whose bounding box best matches the box, :func:`rotated_like_box`); the change from the start box to it is applied to X̂ (which has followed the
         target since). The appearance model starts again from the patches, under X̂ so changed, of the frames so
         far whose patch it had learnt (the start and every updated frame: a frame the update refused, a target
         that has just gone from view, is not learnt now either), as if the track had started on the re-fitted box;
@@ -916,6 +919,8 @@ class AffineParticleFilter:
             aspect = 1.0 / aspect
         fitted = (rotated_like_box(box, angle, aspect) if self._refit_sides == "silhouette"
                   else rotated_in_box(box, angle))
+        if fitted is None:          # near 45 deg the box does not fix the sides (rotated_in_box is singular there)
+            fitted = rotated_like_box(box, angle, aspect, max_angle=np.pi / 4)      # the silhouette's elongation does
         if fitted is None:
             self.start_counts["no silhouette"] += 1
             return None
