@@ -875,8 +875,9 @@ class AffineParticleFilter:
         The silhouette of what moved inside the axis-aligned start box over the first frames gives the target's
         axis; the template's u axis is whichever of its axes is nearer the box's. The box is taken for the
         turned rectangle's bounding box (what a loose detector box is), which fixes the rectangle's sides
-        (:func:`rotated_in_box`; beyond its 40 deg, where a near-square box holds rectangles of many shapes, the sides
-        of the silhouette's elongation whose bounding box best matches the box, :func:`rotated_like_box`); the change from the start box to it is applied to X̂ (which has followed the
+        (:func:`rotated_in_box`; beyond its ``IN_BOX_MAX_ANGLE``, where a near-square box holds rectangles of many
+        shapes, the sides of the silhouette's elongation whose bounding box best matches the box,
+        :func:`rotated_like_box`); the change from the start box to it is applied to X̂ (which has followed the
         target since). The appearance model starts again from the patches, under X̂ so changed, of the frames so
         far whose patch it had learnt (the start and every updated frame: a frame the update refused, a target
         that has just gone from view, is not learnt now either), as if the track had started on the re-fitted box;
@@ -919,7 +920,7 @@ class AffineParticleFilter:
             aspect = 1.0 / aspect
         fitted = (rotated_like_box(box, angle, aspect) if self._refit_sides == "silhouette"
                   else rotated_in_box(box, angle))
-        if fitted is None:          # near 45 deg the box does not fix the sides (rotated_in_box is singular there)
+        if fitted is None and abs(angle) > IN_BOX_MAX_ANGLE:      # near 45 deg the box does not fix the sides
             fitted = rotated_like_box(box, angle, aspect, max_angle=np.pi / 4)      # the silhouette's elongation does
         if fitted is None:
             self.start_counts["no silhouette"] += 1
@@ -1032,7 +1033,10 @@ TURN_MIN_ELONGATION = 1.5   # rotation_gain: a silhouette less elongated has no 
 TURN_MAX = 0.25             # rotation_gain: the angle a frame's silhouette can turn X̂ by, before the gain [rad]
 
 
-def rotated_in_box(box: np.ndarray, angle: float, max_angle: float = np.deg2rad(40), min_side: float = 0.2
+IN_BOX_MAX_ANGLE = np.deg2rad(40)     # rotated_in_box: its system is singular at 45 deg
+
+
+def rotated_in_box(box: np.ndarray, angle: float, max_angle: float = IN_BOX_MAX_ANGLE, min_side: float = 0.2
                    ) -> np.ndarray | None:
     """The state (3x3) of the rectangle turned by ``angle`` [rad] whose axis-aligned bounding box is the
     axis-aligned ``box`` state: sides w, h with W = w|cos| + h|sin|, H = w|sin| + h|cos| (W, H the box's),
