@@ -665,12 +665,16 @@ class AffineParticleFilter:
         axes = self.config.extent_axes
         if axes == "prior":
             axes = "estimate" if self._prior_rotation is None else float(self._prior_rotation)
-        small = self.config.extent_small_share
-        extent = foreground_extent(foreground, estimate, self.background.scale, axes=axes, small_share=small)
+        extent = self._foreground_extent(foreground, estimate, axes=axes)
         if extent is None and self.config.extent_wide > 1.6:
-            extent = foreground_extent(foreground, estimate, self.background.scale, extent=self.config.extent_wide,
-                                       axes=axes, small_share=small)
+            extent = self._foreground_extent(foreground, estimate, extent=self.config.extent_wide, axes=axes)
         return extent
+
+    def _foreground_extent(self, foreground: np.ndarray, state: np.ndarray, **options):
+        """static_background.foreground_extent about ``state`` at the background's scale, with this filter's
+        ``extent_small_share``."""
+        return foreground_extent(foreground, state, self.background.scale,
+                                 small_share=self.config.extent_small_share, **options)
 
     def _extent_correction(self, estimate: np.ndarray) -> np.ndarray | None:
         """The step ``exp(extent_gain · log C)`` that moves X̂ toward the foreground's rectangle C
@@ -696,8 +700,7 @@ class AffineParticleFilter:
             q = to_chart(estimate[None])
             q[0, 4] += float(np.clip(extent.axis_angle, -self.config.extent_rotation, self.config.extent_rotation))
             candidate = from_chart(q)[0]
-            extent = foreground_extent(foreground, candidate, self.background.scale,
-                                       small_share=self.config.extent_small_share) or extent
+            extent = self._foreground_extent(foreground, candidate) or extent
         if _plausible(extent):
             self._restart_bounds = None
         elif not (self._restart_bounds and _plausible(extent, *self._restart_bounds)):
@@ -918,10 +921,10 @@ class AffineParticleFilter:
         if abs(angle) > np.pi / 4:                # the box's u axis is nearer the silhouette's minor axis
             angle -= np.sign(angle) * np.pi / 2
             aspect = 1.0 / aspect
-        fitted = (rotated_like_box(box, angle, aspect) if self._refit_sides == "silhouette"
+        # near 45 deg the box does not fix the sides (rotated_in_box is singular there): the silhouette's elongation does
+        by_silhouette = self._refit_sides == "silhouette" or abs(angle) > IN_BOX_MAX_ANGLE
+        fitted = (rotated_like_box(box, angle, aspect, max_angle=np.pi / 4) if by_silhouette
                   else rotated_in_box(box, angle))
-        if fitted is None and abs(angle) > IN_BOX_MAX_ANGLE:      # near 45 deg the box does not fix the sides
-            fitted = rotated_like_box(box, angle, aspect, max_angle=np.pi / 4)      # the silhouette's elongation does
         if fitted is None:
             self.start_counts["no silhouette"] += 1
             return None

@@ -508,11 +508,12 @@ def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, e
         return None
     overlap = np.bincount(labels[near], minlength=count)
     overlap[0] = 0
-    keep = np.flatnonzero(overlap >= PIECE_SHARE * overlap.max())
+    largest = overlap.max()
+    keep = np.flatnonzero(overlap >= PIECE_SHARE * largest)
     keep = keep[keep > 0]
     kept = np.isin(labels, keep)
     if small_share > 0:
-        small = np.flatnonzero((overlap >= small_share * overlap.max()) & (overlap < PIECE_SHARE * overlap.max()))
+        small = np.flatnonzero((overlap >= small_share * largest) & (overlap < PIECE_SHARE * largest))
         kept |= np.isin(labels, small[small > 0]) & inner
     ys, xs = np.nonzero(kept)
     if len(xs) < min_fill * inner.sum():
