@@ -198,7 +198,7 @@ class DockingProcessor(MessageProcessor):
                   "particles last frame": self.last.particles, "track starts": self.starts,
                   "method": self.tracker.config.method}
         values.update({f"extent {name}": count for name, count in self.tracker.filter.extent_counts.items()})
-        values["overrides refused (still)"] = self.tracker.overrides_refused
+        values["detections refused (still)"] = self.tracker.still_detections_refused
         if self.tracker.config.start_refit > 0:
             values.update({f"start re-fit {name}": count for name, count in self.tracker.filter.start_counts.items()})
         if self.tracker.config.shape_prior == "silhouette":       # frames whose silhouette moved the shape prior

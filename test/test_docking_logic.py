@@ -252,7 +252,7 @@ def test_the_detector_overrides_a_track_it_keeps_seeing_the_aircraft_away_from()
 def test_a_detection_on_the_still_stand_does_not_override_the_track():
     """override_moving: on a still camera a detection away from the track restarts it only where something moves.
     A false detection on the stand's still background, at the same place every frame, is refused and counted
-    (overrides_refused); with override_moving 0 the track restarts on it after override_after frames. The moving
+    (still_detections_refused); with override_moving 0 the track restarts on it after override_after frames. The moving
     target's own detection (the override test above) still restarts a track started on the wrong place."""
     scene = list(moving_target_scene(40))[:12]
     still = detections((250, 180, 48, 32, 0.9, 1))          # bottom right, where nothing moves
@@ -261,13 +261,36 @@ def test_a_detection_on_the_still_stand_does_not_override_the_track():
         tracker = DockingTracker(DockingConfig(**{"override_after": 3, "seed": 0, **cfg}))
         tracker.start(scene[0][0], scene[0][1])             # the track on the target
         results = [tracker.step(frame, still) for frame, _ in scene[1:]]
-        return [i for i, r in enumerate(results, 1) if r.started], tracker.overrides_refused, results[-1]
+        return [i for i, r in enumerate(results, 1) if r.started], tracker.still_detections_refused, results[-1]
 
     restarts, refused, last = run()
     assert restarts == [] and refused >= 5
     assert np.linalg.norm(last.params[:2] - ag.to_params(scene[-1][1])[:2]) < 10     # still on the target
     restarts, refused, _ = run(override_moving=0.0)
     assert restarts == [3] and refused == 0
+
+
+def test_a_detection_on_the_still_stand_does_not_re_acquire_a_lost_track():
+    """override_moving also guards the re-acquisition: a lost track (its filter still on the moving target) is not
+    restarted on a false detection on the stand's still background, and each refusal is counted; with
+    override_moving 0 the first such detection re-acquires it (start_after 1)."""
+    scene = list(moving_target_scene(40))[:12]
+    still = detections((250, 180, 48, 32, 0.9, 1))
+
+    def run(**cfg):
+        tracker = DockingTracker(DockingConfig(**{"override_after": 0, "recover_after": 1000, "seed": 0, **cfg}))
+        tracker.start(scene[0][0], scene[0][1])
+        for frame, _ in scene[1:6]:
+            tracker.step(frame)                             # the stand around the target becomes known
+        tracker.state = LOST
+        results = [tracker.step(frame, still) for frame, _ in scene[6:]]
+        return [i for i, r in enumerate(results) if r.started], tracker.still_detections_refused, results[-1]
+
+    restarts, refused, last = run()
+    assert restarts == [] and refused == 6 and last.state == LOST
+    assert np.linalg.norm(last.params[:2] - ag.to_params(scene[-1][1])[:2]) < 10     # still on the target
+    restarts, refused, _ = run(override_moving=0.0)
+    assert restarts == [0] and refused == 0
 
 
 def test_a_detection_that_agrees_on_the_centre_restarts_nothing_with_keep_agreeing():

@@ -33,7 +33,9 @@ all day must settle what happens before the aircraft appears and when the track 
 * **lost** (state 1): the filter keeps running where it was (the aircraft may come back from behind
   a vehicle) and the track is reported again after ``recover_after`` consecutive frames at or
   above ``lost_score``; meanwhile a detection of the aircraft class restarts the filter on it
-  (re-acquisition), a new appearance model included.
+  (re-acquisition), a new appearance model included; on a still camera not while the lost track's box is
+  foreground and the detection's is not (``override_moving``: the track was lost on the moving aircraft, and the
+  detection is a false one on the stand).
 """
 from __future__ import annotations
 
@@ -128,8 +130,10 @@ class DockingConfig(FilterConfig):
                                    "least this fraction foreground on the last frame (an approaching aircraft moves; a "
                                    "detection on the still stand, a marking in a low sun's glare, is background: new "
                                    "600-619 scene 614 restarted on one at frame 31 and stayed there to frame 115, AUC "
-                                   "0.26 on every tracker seed); no foreground measured (rain, a moving camera): as "
-                                   "before; 0: off", low=0.0, high=1.0)
+                                   "0.26 on every tracker seed), and a lost track whose own box is that much foreground "
+                                   "is not re-acquired on one that is not (702, lost on the aircraft at IoU 0.75, was "
+                                   "re-acquired on one: 0.59 -> 0.79); no foreground measured (rain, a moving camera): "
+                                   "as before; 0: off", low=0.0, high=1.0)
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
     override_iou_agreeing: float = param(0.3, "a detection that agrees with the track on the centre (each box "
@@ -206,7 +210,7 @@ class DockingTracker:
         self._low = self._good = 0
         self._away, self._away_box = 0, None
         self._seen, self._seen_box = 0, None
-        self.overrides_refused = 0          # override_moving: detections away from the track on the still stand
+        self.still_detections_refused = 0   # override_moving: override or re-acquisition boxes on the still stand
         if len(self.config.initial_box) == 4:
             self.request_start(self.config.initial_box)
 
@@ -249,7 +253,8 @@ class DockingTracker:
             if box is not None and not (self.state == LOST and self.config.keep_agreeing
                                         and centres_agree(box[None], ag.to_box(self.filter.estimate))[0]):
                 self._seen, self._seen_box = _run_at(self._seen, self._seen_box, box), box
-                if self._seen >= self.config.start_after:
+                if self._seen >= self.config.start_after and not (self.state == LOST and self._holds_motion()
+                                                                  and self._on_still_stand(box)):
                     return self.start(frame, box, detected=True)
         if self.state == WAITING:
             return DockingResult(WAITING)
@@ -301,11 +306,23 @@ class DockingTracker:
         hidden = cfg.override_after_hidden > 0 and self.filter.start_counts["hidden"] > 0
         if self._away < (cfg.override_after_hidden if hidden else cfg.override_after):
             return None
-        share = self.filter.foreground_share(best) if cfg.override_moving > 0 else None
-        if share is not None and share < cfg.override_moving:
-            self.overrides_refused += 1
-            return None
-        return best
+        return None if self._on_still_stand(best) else best
+
+    def _holds_motion(self) -> bool:
+        """Whether the track's own box is foreground (at least ``override_moving`` of it, on a still camera): a lost
+        track still on the moving aircraft, not one left where the aircraft was before it went from view."""
+        share = self.filter.foreground_share(ag.to_box(self.filter.estimate)) if self.config.override_moving > 0 else None
+        return share is not None and share >= self.config.override_moving
+
+    def _on_still_stand(self, box: np.ndarray) -> bool:
+        """``override_moving``: whether a detection's box is still background on a still camera (less than
+        ``override_moving`` of it foreground on the last frame: a false detection on the stand), counted in
+        ``still_detections_refused``; False when no foreground was measured (rain, a moving camera)."""
+        share = self.filter.foreground_share(box) if self.config.override_moving > 0 else None
+        if share is not None and share < self.config.override_moving:
+            self.still_detections_refused += 1
+            return True
+        return False
 
 
 def _run_at(count: int, last: np.ndarray | None, box: np.ndarray) -> int:
