@@ -94,7 +94,8 @@ class DockingConfig(FilterConfig):
                                 "the same place (0: detections are ignored while tracking)", low=0, high=10000)
     override_after_hidden: int = param(1, "override_after for a track whose start re-fit found the aircraft hidden "
                                        "(start re-fit hidden: the box shows almost nothing moving, the track holds the "
-                                       "occluder): 1 restarts on the first detection away from it; 0: override_after. "
+                                       "occluder): 1 restarts on the first detection away from it; 0: override_after "
+                                       "(override_after 0 turns both off). "
                                        "Loose box, 19 hidden starts x 3 tracker seeds: tuning 108-109 / 158-159 mean "
                                        "AUC 0.611 -> 0.680 (2: 0.667), the other 15 0.641 -> 0.669 (2: 0.648)",
                                        low=0, high=10000)
@@ -130,8 +131,9 @@ class DockingConfig(FilterConfig):
                                    "least this fraction foreground on the last frame (an approaching aircraft moves; a "
                                    "detection on the still stand, a marking in a low sun's glare, is background: new "
                                    "600-619 scene 614 restarted on one at frame 31 and stayed there to frame 115, AUC "
-                                   "0.26 on every tracker seed), and a lost track whose own box is that much foreground "
-                                   "is not re-acquired on one that is not (702, lost on the aircraft at IoU 0.75, was "
+                                   "0.26 on every tracker seed), and a lost track whose own box is that much "
+                                   "foreground is not re-acquired on one that is not (702, lost on the aircraft at IoU "
+                                   "0.75, was "
                                    "re-acquired on one: 0.59 -> 0.79); no foreground measured (rain, a moving camera): "
                                    "as before; 0: off", low=0.0, high=1.0)
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
@@ -311,7 +313,9 @@ class DockingTracker:
     def _holds_motion(self) -> bool:
         """Whether the track's own box is foreground (at least ``override_moving`` of it, on a still camera): a lost
         track still on the moving aircraft, not one left where the aircraft was before it went from view."""
-        share = self.filter.foreground_share(ag.to_box(self.filter.estimate)) if self.config.override_moving > 0 else None
+        if self.config.override_moving <= 0:
+            return False
+        share = self.filter.foreground_share(ag.to_box(self.filter.estimate))
         return share is not None and share >= self.config.override_moving
 
     def _on_still_stand(self, box: np.ndarray) -> bool:
