@@ -133,9 +133,8 @@ class DockingConfig(FilterConfig):
                                    "600-619 scene 614 restarted on one at frame 31 and stayed there to frame 115, AUC "
                                    "0.26 on every tracker seed), and a lost track whose own box is that much "
                                    "foreground is not re-acquired on one that is not (702, lost on the aircraft at IoU "
-                                   "0.75, was "
-                                   "re-acquired on one: 0.59 -> 0.79); no foreground measured (rain, a moving camera): "
-                                   "as before; 0: off", low=0.0, high=1.0)
+                                   "0.75, was re-acquired on one: 0.59 -> 0.79); no foreground measured (rain, a moving "
+                                   "camera): as before; 0: off", low=0.0, high=1.0)
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
     override_iou_agreeing: float = param(0.3, "a detection that agrees with the track on the centre (each box "
@@ -310,19 +309,22 @@ class DockingTracker:
             return None
         return None if self._on_still_stand(best) else best
 
+    def _moving_share(self, box: np.ndarray) -> float | None:
+        """``override_moving``: the fraction of ``box`` that is foreground on the last frame; None when the rule is
+        off or no foreground was measured (rain, a moving camera)."""
+        return self.filter.foreground_share(box) if self.config.override_moving > 0 else None
+
     def _holds_motion(self) -> bool:
         """Whether the track's own box is foreground (at least ``override_moving`` of it, on a still camera): a lost
         track still on the moving aircraft, not one left where the aircraft was before it went from view."""
-        if self.config.override_moving <= 0:
-            return False
-        share = self.filter.foreground_share(ag.to_box(self.filter.estimate))
+        share = self._moving_share(ag.to_box(self.filter.estimate))
         return share is not None and share >= self.config.override_moving
 
     def _on_still_stand(self, box: np.ndarray) -> bool:
-        """``override_moving``: whether a detection's box is still background on a still camera (less than
-        ``override_moving`` of it foreground on the last frame: a false detection on the stand), counted in
-        ``still_detections_refused``; False when no foreground was measured (rain, a moving camera)."""
-        share = self.filter.foreground_share(box) if self.config.override_moving > 0 else None
+        """Whether a detection's box is still background on a still camera (less than ``override_moving`` of it
+        foreground: a false detection on the stand), counted in ``still_detections_refused``; False when nothing
+        was measured."""
+        share = self._moving_share(box)
         if share is not None and share < self.config.override_moving:
             self.still_detections_refused += 1
             return True
