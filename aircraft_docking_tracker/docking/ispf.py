@@ -341,6 +341,11 @@ class FilterConfig(AppearanceConfig):
                                    "a row, the earlier ones carried by the target's measured motion (rain streaks and the "
                                    "bands of a clipping colour channel under a changing light last one frame, the "
                                    "aircraft stays; 1: this frame's alone)", low=1, high=5)
+    foreground_colour: bool = param(True, "static camera, BGR frames: the foreground is the largest of the grey "
+                                    "difference from the background and each channel's colour beyond it (a colour "
+                                    "background beside the grey one, each channel its own light): a painted wing at "
+                                    "the ground's grey level is foreground (false, or grey frames: the grey difference "
+                                    "alone, as until session 23)")
     max_foreground_outside: float = param(0.2, "static camera: no extent when more than this fraction of the "
                                           "frame outside the target is foreground (the whole scene changed)",
                                           low=0.0, high=1.0)
@@ -446,7 +451,8 @@ class AffineParticleFilter:
                                            keep_first=(config.start_refit + 1 if config.start_refit
                                                        and config.start_axis == "mask" else 0),
                                            row_offset=config.background_rows, freeze=config.background_freeze,
-                                           relight=config.background_relight, persist=config.foreground_frames)
+                                           relight=config.background_relight, persist=config.foreground_frames,
+                                           colour=config.foreground_colour)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         # restart_extent_low/high: a restart on a box of unknown size, the silhouette's wider plausible bounds until
@@ -623,9 +629,9 @@ class AffineParticleFilter:
         self._start_track = [(given, state.copy(), True)] if self._start_box is not None else []
         if self._static_camera and background is not None:
             self.background = background
-            self.background.restart(frame, state)
+            self.background.restart(frame, state, given)
         elif self._static_camera:
-            self.background.start(frame, state)
+            self.background.start(frame, state, given)
 
     def _initialise(self, state: np.ndarray, patches: np.ndarray | None = None) -> None:
         """A new appearance model (from ``patches``, else the patch of ``state``), estimator, statistics, shape
@@ -654,7 +660,7 @@ class AffineParticleFilter:
         given, frame = frame, self._grey(frame)
         self._load(frame, self.estimate)
         if self._static_camera:
-            self.background.observe(frame, self.estimate)
+            self.background.observe(frame, self.estimate, given)
         if self._start_box is not None:
             self._start_track.append((given, None, False))
 

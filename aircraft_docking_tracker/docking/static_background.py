@@ -38,6 +38,22 @@ the empty stand and measures, in the estimate's own template frame, where the fo
   tuning scenes 100-102, 104 and 150-152, 154 (relit), the silhouette's width came out +0.17 in log (median over
   scenes of the last two thirds' medians), +0.30 in low sun and +0.15-0.24 in rain, measured on 88 % of frames;
   with two frames -0.025 (low sun +0.01-0.05, rain -0.15 to -0.03), on 98 %.
+* **Colour** (``colour``, ``foreground_colour`` in ``ispf.py``, on by default since session 23): given the frame in
+  BGR too, a colour background ``B_c`` is kept beside ``B`` (the same known pixels, steps and relighting, each
+  channel its own gain and offset), and on a still camera's frame ``F`` is thresholded from the largest of the
+  grey difference ``s = I - (a B + c)`` and each channel's colour beyond it, ``|s_c - s|`` with
+  ``s_c = I_c - (a_c B_c + c_c)`` (rows' offsets removed from each), instead of the grey one alone (trust too is
+  decided on it); the camera's shift and staleness and the target motion stay grey. Why: a wing
+  painted at the apron's grey level (thin grey wings with a coloured edge, in rain) is no grey difference; its
+  pieces broke from the fuselage's, lay outside a track that had narrowed, and were dropped, so the extent
+  measured the track's own width and held it there (held-out rain approaches: X̂'s width 0.55 of the truth's
+  late in the approach). About the true state narrowed to 0.6 of its width, late in rain approach 301 the grey
+  extent measures 0.65 of the truth's width, the colour one 0.99. Why the colour beyond the grey and not each
+  channel's own difference (measured first): in rain the relit background's dark tree line on the horizon was
+  off by 10-13 levels in red and 4 in green and blue (the light fit's error on the darkest pixels), a row too far
+  off for the rows' offsets (``row_max``); joined to the wing tips this band widened X̂ at the stop (held-out
+  rain approaches: the last tenth's IoU 0.80 -> 0.74, the stop's aspect error 0.09 -> 0.39 in the median). The
+  part of the error common to the channels is grey, and under the grey threshold as before.
 * **Rows' offsets** (``row_offset``, ``background_rows`` in ``ispf.py``): on a trusted frame the silhouette
   is thresholded (same threshold) after each image row's median of ``I - (a B + c)`` over its pixels outside
   the target is removed (:func:`row_offsets`; a row with fewer than ``row_min`` such pixels, or whose
@@ -162,7 +178,7 @@ class Extent:
 def _level_image(frame: np.ndarray, level: int) -> np.ndarray:
     image = np.asarray(frame, dtype=np.float32)
     for _ in range(level):
-        if min(image.shape) < 16:
+        if min(image.shape[:2]) < 16:
             break
         image = cv2.pyrDown(image)
     return image
@@ -187,8 +203,11 @@ class StaticBackground:
                  flicker_gain: float = 0.0, flicker_step: float = 1.0, motion: bool = False,
                  motion_max_shift: float = 0.15, max_stale: float = 1.35, stale_window: int = 25,
                  keep_first: int = 0, row_offset: bool = False, row_min: int = 16, row_max: float = 2.0,
-                 freeze: float = 0.0, relight: bool = False, persist: int = 1):
+                 freeze: float = 0.0, relight: bool = False, persist: int = 1, colour: bool = False):
         self.keep_first = keep_first
+        self.colour = colour
+        self.colour_background: np.ndarray | None = None  # colour: B of the BGR frames (H x W x 3), else None
+        self._colour_image: np.ndarray | None = None      # colour: this frame at the level, BGR
         self.relight = relight
         self.persist = persist
         self._recent: list[np.ndarray] = []         # the last persist - 1 trusted frames' foregrounds
@@ -215,15 +234,18 @@ class StaticBackground:
         self._still: np.ndarray | None = None
         self._previous: np.ndarray | None = None
 
-    def start(self, frame: np.ndarray, state: np.ndarray) -> None:
+    def start(self, frame: np.ndarray, state: np.ndarray, colour: np.ndarray | None = None) -> None:
         """B = the frame at the pyramid level at most ``max_width`` wide (the cost per frame stays that of
-        a 320 x 240 image at any camera resolution); the region around ``state`` is unknown."""
+        a 320 x 240 image at any camera resolution); the region around ``state`` is unknown. ``colour``: the
+        same frame in BGR, when the camera gives one (``colour``)."""
         width = np.asarray(frame).shape[1]
         self.level = int(max(0, np.ceil(np.log2(max(width / self.max_width, 1.0)))))
         image = _level_image(frame, self.level)
         self.scale = image.shape[1] / np.asarray(frame).shape[1]
         hole = state_mask(state, self.guard, image.shape, self.scale)
         self.background = image.copy()
+        self._colour_image = self._colour_level(colour, image.shape)
+        self.colour_background = None if self._colour_image is None else self._colour_image.copy()
         self.known = hole == 0
         self._still = np.zeros(image.shape, np.int32)
         self._previous = image
@@ -238,7 +260,14 @@ class StaticBackground:
         self._recent = []
         self.first = [image] if self.keep_first > 0 else []
 
-    def restart(self, frame: np.ndarray, state: np.ndarray) -> None:
+    def _colour_level(self, colour: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray | None:
+        """``colour`` (a BGR frame) at the level, or None (``colour`` off, no BGR frame, another size)."""
+        if not self.colour or colour is None or np.asarray(colour).ndim != 3:
+            return None
+        image = _level_image(colour, self.level)
+        return image if image.shape[:2] == shape else None
+
+    def restart(self, frame: np.ndarray, state: np.ndarray, colour: np.ndarray | None = None) -> None:
         """A new track on the same camera (a restart mid-approach: lost, re-acquired, the detector override):
         what ``B`` knows of the stand is kept (background, known pixels, still counts, the camera's stale
         ratio and still run); only what belongs to the old track is dropped (this frame's foreground and
@@ -248,9 +277,10 @@ class StaticBackground:
         restarts"). A frame of another size than ``B`` starts afresh."""
         image = _level_image(frame, self.level)
         if self.background is None or image.shape != self.background.shape:
-            self.start(frame, state)
+            self.start(frame, state, colour)
             return
         self._drop_track(image)
+        self._colour_image = self._colour_level(colour, image.shape)
         self._learn(image)
 
     @property
@@ -258,15 +288,19 @@ class StaticBackground:
         """The motion is measured on this frame and no corner under the estimate moved (``motion`` None)."""
         return self.measure_motion and self.motion is None
 
-    def observe(self, frame: np.ndarray, state: np.ndarray) -> np.ndarray | None:
-        """F of ``frame`` given the target near ``state`` (None if untrusted); then B moves toward it."""
+    def observe(self, frame: np.ndarray, state: np.ndarray, colour: np.ndarray | None = None) -> np.ndarray | None:
+        """F of ``frame`` given the target near ``state`` (None if untrusted); then B moves toward it.
+        ``colour``: the same frame in BGR, when the camera gives one (``colour``: F from its channels)."""
         image = _level_image(frame, self.level)
         if self.background is None or image.shape != self.background.shape:
-            self.start(frame, state)
+            self.start(frame, state, colour)
             return None
+        self._colour_image = self._colour_level(colour, image.shape)
+        if self._colour_image is None:
+            self.colour_background = None      # a grey frame: the colour background is not kept up any more
         outside = state_mask(state, self.guard, image.shape, self.scale) == 0
         self.foreground, self.trusted, self.motion = None, False, None
-        shift, lit = np.inf, None
+        shift, lit, lit_colour = np.inf, None, None
         if outside.sum() >= 100:             # else too little background to measure anything
             shift = self.camera_shift(image, outside)
             gain, offset = _light_fit(self.background, image, outside)
@@ -278,6 +312,14 @@ class StaticBackground:
         if self.measure_motion and shift <= self.max_shift and self.still_run > self.still_frames:
             self.motion = target_motion(self._previous, image, state, self.scale)
         still_camera = shift <= self.max_shift and not self.camera_moving   # this frame measures a foreground
+        if still_camera and self.colour_background is not None:    # the foreground from the channels, each lit
+            lit_colour = np.stack([a * self.colour_background[..., c] + b for c, (a, b) in enumerate(
+                _light_fit(self.colour_background[..., c], self._colour_image[..., c], outside)
+                for c in range(3))], axis=2).astype(np.float32)
+            # the grey difference and each channel's beyond it (its colour alone): a light the fit leaves
+            # uneven moves every channel alike and stays a grey difference
+            signed = np.stack([signed, *(self._colour_image[..., c] - lit_colour[..., c] - signed for c in range(3))])
+            difference = np.abs(signed).max(axis=0)
         if still_camera:
             d = cv2.blur(difference * self.known, (5, 5))
             median, sigma = _median_and_noise(d[outside][::5])
@@ -289,8 +331,7 @@ class StaticBackground:
                                          np.clip(target - self.flicker, -self.flicker_step, self.flicker_step), 0.0)
             self.trusted = bool(np.isfinite(fg).all() and (fg[outside] > 0.5).mean() <= self.max_outside)
             if self.trusted and self.row_offset:    # trust and threshold as above; the silhouette without the rows' bands
-                rows = row_offsets(signed, outside & self.known, self.row_min, self.row_max)
-                d = cv2.blur(np.abs(signed - rows[:, None]) * self.known, (5, 5))
+                d = cv2.blur(self._without_rows(signed, outside & self.known) * self.known, (5, 5))
                 fg = np.clip((d - threshold) / (self.k * sigma), 0.0, 1.0)
             self.foreground = self._persistent(fg * self.known) if self.trusted else None
         if not self.trusted:
@@ -299,11 +340,20 @@ class StaticBackground:
             self.first.append(image)
         if self.relight and still_camera:       # (a still camera had the background outside to fit the light)
             self.background = lit               # B takes this frame's light at once (still camera), the scene by step
+            if lit_colour is not None:
+                self.colour_background = lit_colour
         frozen = None           # freeze: only on a still camera (after a pan, B inside the region must be relearnt)
         if self.freeze > 0 and still_camera:
             frozen = state_mask(state, self.freeze, image.shape, self.scale) > 0
         self._learn(image, frozen)
         return self.foreground
+
+    def _without_rows(self, signed: np.ndarray, region: np.ndarray) -> np.ndarray:
+        """``|signed|`` with each image row's offset removed (:func:`row_offsets` over ``region``); of a stack of
+        differences (C x H x W: the grey one and the channels' colour), each one's rows removed, then the largest."""
+        if signed.ndim == 2:
+            return np.abs(signed - row_offsets(signed, region, self.row_min, self.row_max)[:, None])
+        return np.max([self._without_rows(channel, region) for channel in signed], axis=0)
 
     def _persistent(self, foreground: np.ndarray) -> np.ndarray | None:
         """``persist`` > 1: the minimum of this frame's foreground and the last ``persist - 1`` trusted frames' in a
@@ -355,6 +405,10 @@ class StaticBackground:
         self.known |= learnt
         moving = self.known if frozen is None else self.known & ~frozen
         self.background += np.where(moving, np.clip(image - self.background, -self.step, self.step), 0)
+        if self.colour_background is not None and self._colour_image is not None:     # the same steps, per channel
+            self.colour_background[learnt] = self._colour_image[learnt]
+            self.colour_background += np.where(moving[..., None], np.clip(
+                self._colour_image - self.colour_background, -self.step, self.step), 0)
         self._previous = image
 
     def camera_shift(self, image: np.ndarray, outside: np.ndarray | None = None) -> float:
