@@ -295,7 +295,8 @@ class StaticBackground:
         if self.background is None or image.shape != self.background.shape:
             self.start(frame, state, colour)
             return None
-        self._colour_image = self._colour_level(colour, image.shape)
+        self._colour_image = (self._colour_level(colour, image.shape) if self.colour_background is not None
+                              else None)
         if self._colour_image is None:
             self.colour_background = None      # a grey frame: the colour background is not kept up any more
         outside = state_mask(state, self.guard, image.shape, self.scale) == 0
@@ -313,12 +314,7 @@ class StaticBackground:
             self.motion = target_motion(self._previous, image, state, self.scale)
         still_camera = shift <= self.max_shift and not self.camera_moving   # this frame measures a foreground
         if still_camera and self.colour_background is not None:    # the foreground from the channels, each lit
-            lit_colour = np.stack([a * self.colour_background[..., c] + b for c, (a, b) in enumerate(
-                _light_fit(self.colour_background[..., c], self._colour_image[..., c], outside)
-                for c in range(3))], axis=2).astype(np.float32)
-            # the grey difference and each channel's beyond it (its colour alone): a light the fit leaves
-            # uneven moves every channel alike and stays a grey difference
-            signed = np.stack([signed, *(self._colour_image[..., c] - lit_colour[..., c] - signed for c in range(3))])
+            lit_colour, signed = self._colour_difference(signed, outside)
             difference = np.abs(signed).max(axis=0)
         if still_camera:
             d = cv2.blur(difference * self.known, (5, 5))
@@ -347,6 +343,18 @@ class StaticBackground:
             frozen = state_mask(state, self.freeze, image.shape, self.scale) > 0
         self._learn(image, frozen)
         return self.foreground
+
+    def _colour_difference(self, signed: np.ndarray, outside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The colour background under this frame's light (each channel its own gain and offset, fitted
+        ``outside`` the target) and the stack (4 x H x W) of the grey difference ``signed`` and each channel's
+        difference beyond it: a light the fit leaves uneven moves every channel alike and stays grey."""
+        lit, beyond = [], []
+        for c in range(3):
+            background, image = self.colour_background[..., c], self._colour_image[..., c]
+            gain, offset = _light_fit(background, image, outside)
+            lit.append(gain * background + offset)
+            beyond.append(image - lit[-1] - signed)
+        return np.stack(lit, axis=2), np.stack([signed, *beyond])
 
     def _without_rows(self, signed: np.ndarray, region: np.ndarray) -> np.ndarray:
         """``|signed|`` with each image row's offset removed (:func:`row_offsets` over ``region``); of a stack of
