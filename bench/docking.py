@@ -157,7 +157,7 @@ def docking_sequences(tmp: Path, count: int, frames: int, seed0: int = REPORT_SE
 # Trackers
 # ================================================================================================
 SEED_PRESET = dict(chart="unit", ar_dims="all", estimate="best", update_rule="background", anchor_weight=0.0,
-                   skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0, motion_gain=0.0, override_after=0)
+                   moving_anchor_weight=0.0, skew_pull=0.0, aspect_pull=0.0, tune_min_gain=0.0, extent_gain=0.0, motion_gain=0.0, override_after=0)
 ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 undone, or an option tried)
     "ISPF, seed's choices (docking_tracker_seed.yaml)": SEED_PRESET,
     "ISPF, argmax estimate": {"estimate": "best"},
@@ -166,6 +166,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, no shape pull": {"skew_pull": 0.0, "aspect_pull": 0.0},
     "ISPF, seed update rule": {"update_rule": "background"},
     "ISPF, anchor term β=0.3": {"anchor_weight": 0.3},
+    "ISPF, no anchor term on a moving camera (moving_anchor_weight 0)": {"moving_anchor_weight": 0.0},
     "ISPF, tune all 6 (Li et al.)": {"tune_dims": "all"},
     "ISPF, no static-camera extent": {"extent_gain": 0.0},
     "ISPF, no target motion": {"motion_gain": 0.0},

@@ -156,6 +156,22 @@ def test_update_floor_is_lowered_only_under_a_lasting_low_score_on_a_moving_came
     assert floors[2.0, True, "hidden"] == 0.6                     # never below update_low
 
 
+def test_the_anchor_term_weighs_moving_anchor_weight_where_no_still_camera_checks_the_track():
+    """The model's β is ``anchor_weight`` on a still camera's frames and ``moving_anchor_weight`` on the others: the
+    static-camera model off, or the camera judged moving (a pan of 3 px a frame)."""
+    scene = list(moving_target_scene(12))
+    config = dict(seed=0, anchor_weight=0.1, moving_anchor_weight=0.4)
+    weights = {}
+    for name, extra, pan in (("still", {}, 0), ("no static model", {"extent_gain": 0.0, "motion_gain": 0.0}, 0),
+                             ("moving", {}, 3)):
+        flt = make_filter(FilterConfig(**config, **extra))
+        flt.start(*scene[0])
+        for i, (frame, _) in enumerate(scene[1:], 1):
+            flt.step(np.roll(frame, pan * i, axis=1))
+        weights[name] = (flt.model.anchor_weight, flt.background.camera_moving)
+    assert weights == {"still": (0.1, False), "no static model": (0.4, False), "moving": (0.4, True)}
+
+
 def test_a_lasting_change_of_appearance_is_learnt_with_update_relative():
     """Half of the target's texture replaced from frame 8 on, no static-camera model (what a moving camera leaves):
     the absolute floor never updates the model again (Ŝ about 0.5-0.65, the start's model to the end); the relative

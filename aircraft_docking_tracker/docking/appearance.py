@@ -125,6 +125,7 @@ class ObservationModel:
                                             config.max_basis, config.forgetting)
         self._pending: list[np.ndarray] = []
         self.anchor = np.zeros(config.template_width * config.template_height, dtype=np.float32)
+        self.anchor_weight = config.anchor_weight      # β; the filter may change it per frame (moving_anchor_weight)
 
     @property
     def started(self) -> bool:
@@ -152,7 +153,7 @@ class ObservationModel:
         s2 = np.float32(self.config.robust_sigma ** 2)
         e2 = self.subspace.residual(y) ** 2
         sim = 1.0 - (e2 / (e2 + s2)).mean(axis=1)
-        beta = self.config.anchor_weight
+        beta = self.anchor_weight
         if beta > 0:
             sim = (1 - beta) * sim + beta * self.anchor_similarity(y, normalized=True)
         return sim
