@@ -1,7 +1,7 @@
 """Benchmark of the docking tracker (issues 4, 11): ISPF, its ablations, the plain PF and OpenCV's trackers.
 
     nice -n 10 python bench/docking.py [--quick] [--no-peers] [--real-frames N]
-    nice -n 10 python bench/docking.py --real-only [--real-stride N] [--set K=V] [--sweep K=V1,V2]
+    nice -n 10 python bench/docking.py --real-only [--real-stride N] [--degrade KIND] [--set K=V] [--sweep K=V1,V2]
 
 One core for every tracker (BLAS, OpenMP and OpenCV threads = 1), the same frames for all.
 
@@ -119,6 +119,30 @@ def real_sequences(data: Path, max_frames: int | None, stride: int = 1) -> list[
         h, w = cv2.imread(files[0], cv2.IMREAD_GRAYSCALE).shape
         out.append({"name": name, "kind": "real", "files": files, "gt_boxes": gt, "gt_quads": None, "size": [w, h]})
     return out
+
+
+DEGRADATIONS = {   # --degrade: the same footage as a worse camera or light gives it (BGR uint8 -> BGR uint8)
+    "blur": lambda im, rng: cv2.GaussianBlur(im, (0, 0), 2.0),                       # defocus, σ 2 px
+    "contrast": lambda im, rng: np.clip(128 + 0.4 * (im.astype(np.float32) - 128), 0, 255).astype(np.uint8),   # haze
+    "dark": lambda im, rng: np.clip(0.35 * im.astype(np.float32), 0, 255).astype(np.uint8),                   # dusk
+    "noise": lambda im, rng: np.clip(im + rng.normal(0, 12, im.shape), 0, 255).astype(np.uint8),             # gain up
+    "half": lambda im, rng: cv2.resize(im, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA),              # 2x further
+}
+
+
+def degraded(seq: dict, kind: str, folder: Path) -> dict:
+    """``seq`` with every frame degraded by ``DEGRADATIONS[kind]`` into ``folder`` (PNG; noise seeded, so every
+    tracker sees the same frames); the ground truth halved with the frames for ``half``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(7)
+    files = []
+    for i, path in enumerate(seq["files"]):
+        files.append(str(folder / f"{i:05d}.png"))
+        frame = DEGRADATIONS[kind](cv2.imread(path, cv2.IMREAD_COLOR), rng)
+        cv2.imwrite(files[-1], frame, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    factor = 0.5 if kind == "half" else 1.0
+    return {**seq, "files": files, "gt_boxes": np.asarray(seq["gt_boxes"], float) * factor,
+            "size": [round(v * factor) for v in seq["size"]]}
 
 
 def scene_options(k: int) -> dict:
@@ -664,6 +688,9 @@ def main() -> int:
                         help="--real-only: candidate values of a DockingConfig field, on top of --set; repeatable")
     parser.add_argument("--real-stride", type=int, default=1,
                         help="--real-only: every N-th frame (N x the motion per frame: harder footage of the same content)")
+    parser.add_argument("--degrade", choices=sorted(DEGRADATIONS), default="",
+                        help="--real-only: the footage degraded (blur σ 2 px, contrast 0.4x, light 0.35x, noise σ 12, "
+                             "half the resolution): a worse camera or light than these sequences were filmed with")
     parser.add_argument("--peer-worker", nargs=2, metavar=("IN", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.peer_worker:
@@ -680,7 +707,7 @@ def main() -> int:
     if args.real_only:
         peers = [] if args.no_peers or not ensure_contrib_venv() else list(CONTRIB_PEERS[:1])
         run_real(args.seeds or 3, parse_overrides(args.set), parse_sweep(args.sweep), peers,
-                 args.real_frames or 300, args.data, args.tag, args.real_stride)
+                 args.real_frames or 300, args.data, args.tag, args.real_stride, args.degrade)
         return 0
     if args.candidates:
         run_candidates(args.scenes or (2 if args.quick else 20), args.seeds or (1 if args.quick else 3),
@@ -743,11 +770,12 @@ def parse_sweep(items: list[str]) -> dict[str, dict]:
 
 
 def run_real(seeds: int, base: dict, sweep: dict[str, dict], peers: list[str], real_frames: int, data: Path,
-             tag: str = "", stride: int = 1) -> dict:
+             tag: str = "", stride: int = 1, degrade: str = "") -> dict:
     """``--real-only``: ISPF (the defaults with ``base``, and each ``sweep`` candidate on top of it) on the real
     sequences over ``seeds`` tracker seeds, beside the ``peers``; per sequence the mean AUC, the worst seed and
     frames/s; with candidates, leave-one-sequence-out: each held-out sequence gets the candidate with the best mean
     AUC on the other four (the issue's protocol for a parameter), and the worst held-out sequence is reported.
+    ``degrade``: every tracker on the sequences degraded by ``DEGRADATIONS[degrade]`` instead.
     Writes results/docking_real[_<tag>].json (per-frame IoU and boxes of every run, for the diagnosis) and .md."""
     from aircraft_docking_tracker.geometry import box_iou  # noqa: PLC0415
 
@@ -759,6 +787,8 @@ def run_real(seeds: int, base: dict, sweep: dict[str, dict], peers: list[str], r
         raise SystemExit(f"bench/docking: no real sequence under {data / 'sot'} (--data, ADT_SHARED_DATA)")
     with tempfile.TemporaryDirectory(prefix="bench_docking_") as tmp_name:
         for seq in sequences:
+            if degrade:
+                seq = degraded(seq, degrade, Path(tmp_name) / f"{seq['name']}_{degrade}")
             entry = results[seq["name"]] = {"size": seq["size"], "kind": "real", "trackers": {}, "runs": {}}
             for label, overrides in candidates.items():
                 rows, runs = [], []
@@ -780,7 +810,7 @@ def run_real(seeds: int, base: dict, sweep: dict[str, dict], peers: list[str], r
                     print(f"{seq['name']:12s} {name:36s} AUC {entry['trackers'][name]['success_auc']:.3f}", flush=True)
     summary = summarise(results, list(candidates) + peers, list(candidates))
     lines = [f"# Docking tracker, real sequences only ({seeds} tracker seeds, first {real_frames} frames"
-             + (f", every {stride}th" if stride > 1 else "") + ")", "",
+             + (f", every {stride}th" if stride > 1 else "") + (f", degraded: {degrade}" if degrade else "") + ")", "",
              f"Base overrides {json.dumps(base)}; runtime {time.time() - started:.0f} s.", "",
              "| sequence | tracker | mean AUC | worst seed | frames/s |" + (" LOSO pick | LOSO AUC |" if sweep else ""),
              "|---|---|---:|---:|---:|" + ("---|---:|" if sweep else "")]
