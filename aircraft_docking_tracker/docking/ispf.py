@@ -237,8 +237,10 @@ class FilterConfig(AppearanceConfig):
                                         "frames no still camera checks the track (the camera judged moving, or the "
                                         "static-camera model off): there nothing else stops the model learning a drift "
                                         "(OTB Car4 blurred, σ 2 px, median of 3 seeds: 0.67 -> 0.83, and 0.38 -> 0.80, "
-                                        "0.37 -> 0.79 on two other BLAS kernels; on the stand the first appearance would hold back a 4-6x approach "
-                                        "that the extent follows: β 0.3 there lost 0.01-0.02 of median AUC). 0: off",
+                                        "0.37 -> 0.79 on two other BLAS kernels; on the stand the first appearance "
+                                        "holds back a 4-6x approach that the extent follows: β 0.3 there moved six "
+                                        "synthetic sets' medians by -0.018 to +0.009, put two more runs under 0.5 and "
+                                        "raised the stop's aspect error on all six). 0: off",
                                         low=0.0, high=1.0)
     scale_check: float = param(0.0, "multi-scale check of X̂_t: also score X̂ scaled by exp(±this) about its "
                                "centre and keep the best, if better by tune_min_gain (log units); 0: off",
