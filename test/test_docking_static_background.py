@@ -322,21 +322,27 @@ def test_target_motion_is_none_for_a_still_target_or_a_camera_that_follows_it():
     assert target_motion(before, paste(empty, patch, centre, dx=4.0), state, 1.0) is None
 
 
+def captioned_pan(wide, speed: float, n: int, rng, dress):
+    """``n`` frames of a camera panning ``speed`` px a frame over ``wide``, each ``dress``-ed (frame -> frame), with
+    a caption burnt in that does not move (as TinyTLP CarChase2's)."""
+    import cv2  # noqa: PLC0415
+
+    caption = np.where(rng.random((14, 90)) < 0.5, 30, 230).astype(np.uint8)
+    frames = []
+    for i in range(n):
+        frame = dress(cv2.warpAffine(wide, np.float32([[1, 0, -speed * i], [0, 1, 0]]), SIZE[::-1]))
+        frame[8:22, 220:310] = caption
+        frames.append(frame)
+    return frames
+
+
 def panning_clip(speed: float, n: int = 30, seed: int = 3):
     """A camera panning ``speed`` px a frame over a textured stand, a target that moves with it (as a chase
     camera keeps it) and a caption burnt into the picture that does not move (as TinyTLP CarChase2's)."""
-    import cv2  # noqa: PLC0415
-
     rng = np.random.default_rng(seed)
     wide = np.hstack([stand(np.random.default_rng(seed + 1)), stand(np.random.default_rng(seed + 2))])
-    caption = np.where(rng.random((14, 90)) < 0.5, 30, 230).astype(np.uint8)
     box = (140, 100, 40, 20)
-    frames = []
-    for i in range(n):
-        frame = with_target(cv2.warpAffine(wide, np.float32([[1, 0, -speed * i], [0, 1, 0]]), SIZE[::-1]), box, rng=rng)
-        frame[8:22, 220:310] = caption
-        frames.append(frame)
-    return frames, ag.from_box(*box)
+    return captioned_pan(wide, speed, n, rng, lambda frame: with_target(frame, box, rng=rng)), ag.from_box(*box)
 
 
 def test_a_slow_pan_that_passes_the_shift_test_is_judged_moving_and_a_rainy_stand_still():
@@ -375,23 +381,14 @@ def road_pan(speed: float, mark: float, n: int = 40, seed: int = 3):
     """A chase camera sliding ``speed`` px a frame over a grey road with sparse lane marks ``mark`` levels
     brighter, a caption burnt in that does not move (TinyTLP CarChase2 at low contrast: most pixels of the
     road change by less than a grey level from one frame to the next)."""
-    import cv2  # noqa: PLC0415
-
     rng = np.random.default_rng(seed)
     h, w = SIZE
     road = np.full((h, 2 * w), 70.0, np.float32)
     for x0 in range(0, 2 * w, 37):
         for y0 in range(0, h, 29):
             road[y0:y0 + 3, x0:x0 + 14] += mark
-    caption = np.where(rng.random((14, 90)) < 0.5, 30, 230).astype(np.uint8)
-    box = (140, 100, 40, 20)
-    frames = []
-    for i in range(n):
-        frame = cv2.warpAffine(road, np.float32([[1, 0, -speed * i], [0, 1, 0]]), (w, h))
-        frame = np.clip(frame + rng.normal(0, 0.4, frame.shape), 0, 255).round().astype(np.uint8)
-        frame[8:22, 220:310] = caption
-        frames.append(frame)
-    return frames, ag.from_box(*box)
+    noisy = lambda frame: np.clip(frame + rng.normal(0, 0.4, frame.shape), 0, 255).round().astype(np.uint8)  # noqa: E731
+    return captioned_pan(road, speed, n, rng, noisy), ag.from_box(140, 100, 40, 20)
 
 
 def test_a_pan_over_a_road_that_changes_less_than_a_grey_level_a_frame_is_judged_moving():
