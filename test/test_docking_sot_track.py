@@ -32,9 +32,10 @@ def test_sot_track_on_the_first_frames_of_car4(tmp_path, capsys):
 def test_on_blurred_footage_the_anchor_term_keeps_the_box_on_the_car():
     """OTB Car4's first 300 frames blurred (σ 2 px, a defocused camera), 3 tracker seeds: without the anchor term
     the box grows while the car shrinks, every patch still scoring over 0.9 (median success AUC 0.67 natively, 0.38
-    and 0.37 with OPENBLAS_CORETYPE Prescott and Haswell; boxes up to 3x the frame's width); with the moving
-    camera's anchor (``moving_anchor_weight`` 0.3) the median is 0.83, 0.80, 0.79. Single runs still hang on
-    rounding (with the anchor one seed of three grows on Prescott and Haswell), so the medians are asserted."""
+    and 0.37 with OPENBLAS_CORETYPE Prescott and Haswell; boxes up to 3x the frame's width). With the moving
+    camera's anchor at its default (``moving_anchor_weight`` 0.5) every run of 6 seeds on each of three kernels
+    measured 0.80-0.85 (session 25; at 0.3 up to three runs of six fell to 0.29-0.65), so the worst of the three
+    seeds is asserted as well as the median, each with margin."""
     from aircraft_docking_tracker.docking.tracker import DockingConfig  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.sot_metrics import success_auc  # noqa: PLC0415
 
@@ -42,15 +43,18 @@ def test_on_blurred_footage_the_anchor_term_keeps_the_box_on_the_car():
     files = sorted((folder / "img").glob("*.jpg"))[:300]
     frames = [cv2.GaussianBlur(cv2.imread(str(f), cv2.IMREAD_COLOR), (0, 0), 2.0) for f in files]
     gt = read_sot_boxes(folder / "groundtruth_rect.txt")[0][:len(frames)]
+    default = DockingConfig().moving_anchor_weight
+    assert default > 0
     aucs, widest = {}, {}
-    for beta in (0.0, 0.3):
+    for beta in (0.0, default):
         for seed in range(3):
             run = sot_track.track(iter(frames), gt[0], DockingConfig(seed=seed, moving_anchor_weight=beta),
                                   len(frames), progress=False)
             aucs.setdefault(beta, []).append(success_auc(box_iou(run.boxes, gt)))
             widest.setdefault(beta, []).append(float(np.nanmax(run.boxes[:, 2:])))
-    assert np.median(aucs[0.3]) > 0.7 and np.median(aucs[0.3]) > np.median(aucs[0.0]) + 0.05, aucs
-    assert np.median(widest[0.3]) < frames[0].shape[1] / 2, widest     # the car is 60-110 px wide, the frame 360
+    assert np.median(aucs[default]) > 0.75 and np.median(aucs[default]) > np.median(aucs[0.0]) + 0.05, aucs
+    assert min(aucs[default]) > 0.65, aucs
+    assert max(widest[default]) < frames[0].shape[1] / 2, widest     # the car is 60-110 px wide, the frame 360
 
 
 def test_sot_track_pf_on_a_video_with_an_init_box(tmp_path):
