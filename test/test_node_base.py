@@ -224,3 +224,37 @@ def test_a_failed_warm_up_is_logged_by_the_node_and_the_node_still_runs(monkeypa
             assert node.processor is processor
         finally:
             node.destroy_node()
+
+
+def test_a_signal_landing_while_the_executor_builds_its_wait_set_is_a_clean_stop(monkeypatch, capsys):
+    """rclpy's signal handler shuts the context down from another thread; landing while the executor builds its
+    wait set, spin raises RCLError "the given context is not valid" rather than ExternalShutdownException (a
+    `make test` run saw association_node exit 1 so). run_node exits 0 then, and still 1 on a failure while rclpy
+    is up."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation  # noqa: PLC0415
+    from rclpy.node import Node  # noqa: PLC0415
+
+    from aircraft_docking_tracker.ros import node_base  # noqa: PLC0415
+
+    class SignalledExecutor:
+        def add_node(self, node):
+            self.node = node
+
+        def spin(self):
+            rclpy.shutdown()          # what the signal handler's thread does
+            raise rclpy_implementation.RCLError("failed to initialize wait set: the given context is not valid, "
+                                                "either rcl_init() was not called or rcl_shutdown() was called.")
+
+    class BrokenExecutor(SignalledExecutor):
+        def spin(self):
+            raise RuntimeError("a bug in a callback")
+
+    monkeypatch.setattr(node_base, "SingleThreadedExecutor", SignalledExecutor)
+    assert node_base.run_node(Node, ["toy_node"], node_name="toy_node") == 0
+    assert "stopped" not in capsys.readouterr().err
+    monkeypatch.setattr(node_base, "SingleThreadedExecutor", BrokenExecutor)
+    with pytest.raises(SystemExit) as stopped:
+        node_base.run_node(Node, ["toy_node"], node_name="toy_node")
+    assert stopped.value.code == 1
+    assert "toy_node: stopped: RuntimeError: a bug in a callback" in capsys.readouterr().err
+    assert not rclpy.ok()

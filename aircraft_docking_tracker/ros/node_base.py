@@ -539,11 +539,18 @@ def run_node(node_class: type, args: list[str] | None = None, **node_kwargs) -> 
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - one line for the operator, the trace for a bug report
-        print(f"{prog}: {'stopped' if node is not None else 'cannot start'}: {type(exc).__name__}: {exc}",
-              file=sys.stderr)
-        if os.environ.get("ADT_TRACEBACK"):
-            traceback.print_exc(file=sys.stderr)
-        code = 1 if node is not None else 2
+        if node is not None and not rclpy.ok():
+            # SIGINT/SIGTERM: rclpy's signal handler shuts the context down from another thread; if that lands
+            # while the executor builds its wait set, spin raises RCLError "failed to initialize wait set: the
+            # given context is not valid" instead of ExternalShutdownException (ros2/rclpy#398,
+            # ros2/ros2cli#854). The node was asked to stop, and it stops cleanly.
+            pass
+        else:
+            print(f"{prog}: {'stopped' if node is not None else 'cannot start'}: {type(exc).__name__}: {exc}",
+                  file=sys.stderr)
+            if os.environ.get("ADT_TRACEBACK"):
+                traceback.print_exc(file=sys.stderr)
+            code = 1 if node is not None else 2
     finally:
         if node is not None:
             node.destroy_node()
