@@ -56,3 +56,24 @@ def test_recorder_process_stopped_by_signal(tmp_path, sig):
         assert proc.returncode == 0, output
         assert not reader.truncated and "wrote 50 messages" in output
     assert [m.data for _, m, _ in reader.ros_messages()] == [f"m{i}" for i in range(50)]
+
+
+def test_a_signal_landing_while_the_executor_builds_its_wait_set_closes_the_bag_and_exits_0(tmp_path, monkeypatch,
+                                                                                          capsys):
+    """The signal handler's shutdown can race the executor's wait set (RCLError "the given context is not valid"
+    from spin_once, not ExternalShutdownException): the recorder closes its bag and exits 0 as on any Ctrl-C."""
+    import rclpy.executors  # noqa: PLC0415
+    from rclpy.impl.implementation_singleton import rclpy_implementation  # noqa: PLC0415
+
+    from aircraft_docking_tracker.io import mcap_record  # noqa: PLC0415
+
+    class SignalledExecutor(rclpy.executors.SingleThreadedExecutor):
+        def spin_once(self, timeout_sec=None):
+            rclpy.shutdown()          # what the signal handler's thread does
+            raise rclpy_implementation.RCLError("failed to initialize wait set: the given context is not valid")
+
+    monkeypatch.setattr(rclpy.executors, "SingleThreadedExecutor", SignalledExecutor)
+    out = tmp_path / "rec.mcap"
+    assert mcap_record.main(["/nobody", "-o", str(out), "--ros-args", "-r", "__node:=racing_recorder"]) == 0
+    assert "wrote 0 messages" in capsys.readouterr().out
+    assert out.read_bytes().endswith(b"\x89MCAP0\r\n")     # closed: the footer and the closing magic written

@@ -260,6 +260,11 @@ def main(args: list[str] | None = None) -> int:
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a signal shut rclpy down while the executor built its wait set (RCLError "the given context is not
+        # valid", ros2/rclpy#398; ros/node_base.run_node): the stop that was asked for
     finally:
         # held messages, if any: the clock's time now (0 if /clock never came, as the node saw it)
         recorder.release_pending(node.get_clock().now().nanoseconds)
