@@ -163,3 +163,16 @@ def test_replay_qos_from_recorded_metadata_and_from_damaged_metadata():
     for damaged in ("- history: 1\n  depth: q0\n  reliability: 1\n", "- depth: -3\n", "- depth: 99999999999\n",
                     "- [1, 2]\n", "- 7\n", "{depth: 5}\n", ":\n  - :"):
         assert qos_from_metadata(damaged) is None, damaged
+
+
+def test_an_empty_recording_is_told_apart_from_a_truncated_one(tmp_path):
+    """A complete MCAP with no message (mcap_record stopped before any came) says so; the same file cut short is
+    still a truncated one, with where the reading stopped."""
+    writer = BagWriter(tmp_path / "empty.mcap")
+    writer.close()
+    with pytest.raises(BagError, match="holds no message"):
+        BagReader(tmp_path / "empty.mcap")
+    data = (tmp_path / "empty.mcap").read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(data[:len(data) // 2])
+    with pytest.raises(BagError, match="truncated MCAP with no readable message .stopped at a damaged"):
+        BagReader(tmp_path / "cut.mcap")
