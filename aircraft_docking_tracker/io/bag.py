@@ -723,8 +723,8 @@ class _McapFile:
             self.topics[name].count = n
         if self.start_ns is None:
             if not self.topics:
-                if self.error is None:     # read to its end without damage: a recording of nothing (mcap_record
-                    raise BagError(f"{self.path}: holds no message (an empty recording)")   # stopped before any)
+                if self.error is None:     # read to its end undamaged: mcap_record stopped before any message
+                    raise BagError(f"{self.path}: holds no message (an empty recording)")
                 raise BagError(f"{self.path}: truncated MCAP with no readable message ({self.error})")
             self.start_ns = self.end_ns = 0
 
