@@ -36,7 +36,7 @@ Choices the seed leaves open (Li et al. 2012 define them; named here):
   on the others. On a moving camera nothing else keeps the model from learning a drift: on the real sequences
   blurred (σ 2 px) the box of OTB Car4 grew to the frame's size and beyond while every patch scored 0.92-0.98
   (median success AUC of 3 tracker seeds 0.67, 0.83 with β 0.3; on two other BLAS kernels 0.38 -> 0.80 and
-  0.37 -> 0.79, one seed of three still growing there; at β 0.5 all 18 runs of 6 seeds x 3 kernels 0.80-0.85,
+  0.37 -> 0.79, one seed of three still growing there; at β 0.5 all 18 runs of 6 seeds x 3 kernels 0.795-0.851,
   docs/docking_tracker.md, session 25). On the stand the first appearance, a small
   aircraft far off, holds back an approach that grows 4-6x and that the extent follows (β 0.3 there: the stop's
   aspect error up on all six synthetic sets measured, two more runs under 0.5).
@@ -238,7 +238,7 @@ class FilterConfig(AppearanceConfig):
                                         " the frames no still camera checks the track (the camera judged moving, "
                                         "or the static-camera model off): there nothing else stops the model "
                                         "learning a drift (OTB Car4 blurred, σ 2 px, 6 tracker seeds on each of "
-                                        "three BLAS kernels: every run 0.80-0.85 at 0.5; at 0.3 up to three runs "
+                                        "three BLAS kernels: every run 0.795-0.851 at 0.5; at 0.3 up to three runs "
                                         "of six at 0.29-0.65; leaving one real sequence out 0.5 and 0.7 tie "
                                         "within 0.0011, the smaller kept; on the stand the first appearance holds"
                                         " back a 4-6x approach that the extent follows: β 0.3 there moved six "
