@@ -47,3 +47,13 @@ def split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
         else:
             own.append(arg)
     return own, ros
+
+
+def stopped_by_signal() -> bool:
+    """Whether rclpy has been shut down, as its SIGINT/SIGTERM handler does from its own thread. An exception out
+    of an executor's spin after that is the stop landing while the executor built its wait set (RCLError "failed
+    to initialize wait set: the given context is not valid" instead of ExternalShutdownException; ros2/rclpy#398,
+    ros2/ros2cli#854): the stop that was asked for, not a failure."""
+    import rclpy  # noqa: PLC0415 - this module stays importable without ROS
+
+    return not rclpy.ok()

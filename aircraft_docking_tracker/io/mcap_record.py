@@ -28,7 +28,7 @@ import sys
 import threading
 import time
 
-from ..cli import split_ros_args
+from ..cli import split_ros_args, stopped_by_signal
 from .bag import BagError, BagWriter, get_message_class, qos_to_dict, recover
 
 MAX_PENDING = 10_000  # messages held while a use_sim_time recorder waits for its first /clock
@@ -261,10 +261,8 @@ def main(args: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if rclpy.ok():
+        if not stopped_by_signal():     # else Ctrl-C / SIGTERM that raced the executor's wait set: the asked stop
             raise
-        # a signal shut rclpy down while the executor built its wait set (RCLError "the given context is not
-        # valid", ros2/rclpy#398; ros/node_base.run_node): the stop that was asked for
     finally:
         # held messages, if any: the clock's time now (0 if /clock never came, as the node saw it)
         recorder.release_pending(node.get_clock().now().nanoseconds)

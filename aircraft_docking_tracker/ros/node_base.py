@@ -510,7 +510,7 @@ def run_node(node_class: type, args: list[str] | None = None, **node_kwargs) -> 
     worker starved the process (bench/foundation.py: 304 of 650 replayed messages delivered,
     p50 3.2 s late, against 650 of 650 at p95 1.3 ms single-threaded).
     """
-    from ..cli import split_ros_args  # noqa: PLC0415
+    from ..cli import split_ros_args, stopped_by_signal  # noqa: PLC0415
 
     argv = list(sys.argv if args is None else args)
     prog = (argv[0].rsplit("/", 1)[-1] if argv else "") or node_class.__name__
@@ -539,12 +539,8 @@ def run_node(node_class: type, args: list[str] | None = None, **node_kwargs) -> 
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - one line for the operator, the trace for a bug report
-        if node is not None and not rclpy.ok():
-            # SIGINT/SIGTERM: rclpy's signal handler shuts the context down from another thread; if that lands
-            # while the executor builds its wait set, spin raises RCLError "failed to initialize wait set: the
-            # given context is not valid" instead of ExternalShutdownException (ros2/rclpy#398,
-            # ros2/ros2cli#854). The node was asked to stop, and it stops cleanly.
-            pass
+        if node is not None and stopped_by_signal():
+            pass        # Ctrl-C / SIGTERM that raced the executor's wait set: a clean stop
         else:
             print(f"{prog}: {'stopped' if node is not None else 'cannot start'}: {type(exc).__name__}: {exc}",
                   file=sys.stderr)
