@@ -34,6 +34,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml") + glob("config/*.json")),
+        (f"share/{PACKAGE}/config/stands", glob("config/stands/*.yaml")),
     ],
     # Only setuptools, as ROS 2 ament_python packages do: on a Jazzy install the dependencies come
     # from package.xml via rosdep (apt's python3-opencv does not register as the pip distribution

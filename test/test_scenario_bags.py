@@ -13,6 +13,8 @@ from aircraft_docking_tracker.object_table import cloud_to_table
 from aircraft_docking_tracker.scenarios import convert_dataset as cd
 from aircraft_docking_tracker.scenarios import datasets
 from aircraft_docking_tracker.scenarios import make_scenario as ms
+from aircraft_docking_tracker.docking.guidance import GUIDANCE_DTYPE
+from aircraft_docking_tracker.docking.stand import load_stand
 from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
 from conftest import require_data
 
@@ -20,13 +22,22 @@ from conftest import require_data
 def test_make_scenario_docking_bag(tmp_path):
     out = tmp_path / "d.mcap"
     strip = tmp_path / "strip.png"
+    stand_file = tmp_path / "stand.yaml"
     assert ms.main(["--kind", "docking", "--seed", "2", "--out", str(out), "--frames", "8", "--width", "320",
-                    "--height", "240", "--fps", "20", "--quiet", "--strip", str(strip)]) == 0
+                    "--height", "240", "--fps", "20", "--quiet", "--strip", str(strip), "--lateral-offset-m", "1",
+                    "--stand-file", str(stand_file)]) == 0
     reader = BagReader(out)
     assert {t: i.type_name for t, i in reader.topics.items()} == {
         "image": "sensor_msgs/msg/Image", "ground_truth/polygon": "geometry_msgs/msg/PolygonStamped",
-        "ground_truth/nose": "geometry_msgs/msg/PointStamped", "ground_truth/stand": "std_msgs/msg/String"}
-    frames = list(DockingScene(DockingSceneConfig(frames=8, width=320, height=240, fps=20.0), seed=2).frames())
+        "ground_truth/nose": "geometry_msgs/msg/PointStamped", "ground_truth/stand": "std_msgs/msg/String",
+        "ground_truth/guidance": "sensor_msgs/msg/PointCloud2"}
+    scene = DockingScene(DockingSceneConfig(frames=8, width=320, height=240, fps=20.0, lateral_offset_m=1.0), seed=2)
+    guidance = np.concatenate([cloud_to_table(m, GUIDANCE_DTYPE) for _, m, _ in reader.ros_messages(["ground_truth/guidance"])])
+    np.testing.assert_allclose(guidance["distance_m"], scene.guidance_truth()[:, 0], rtol=1e-6)
+    np.testing.assert_allclose(guidance["lateral_m"], scene.guidance_truth()[:, 1], atol=1e-6)
+    assert guidance["state"][0] == 1 and (guidance["state"] == 3).any()        # 8 frames: in, then STOP at the mark
+    assert "synthetic_a320" in load_stand(stand_file).aircraft
+    frames = list(scene.frames())
     polys = [msg for _, msg, _ in reader.ros_messages(["ground_truth/polygon"])]
     assert len(polys) == 8 and polys[3].header.frame_id == "camera"
     np.testing.assert_allclose([[p.x, p.y] for p in polys[3].polygon.points], frames[3].quad, atol=1e-3)

@@ -56,6 +56,8 @@ class DockingSceneConfig(render.StreamConfig):
     camera_distance_m: float = param(45.0, "stand camera distance in front of the stop position [m]",
                                      low=10.0, high=500.0)
     pitch_deg: float = param(5.0, "stand camera downward pitch [deg]", low=0.0, high=45.0)
+    lateral_offset_m: float = param(0.0, "how far the nose wanders off the lead-in line [m, amplitude]: a slow "
+                                    "sway that shrinks to 30 % of it at the stop; 0: on the line", low=0.0, high=10.0)
 
 
 @dataclass
@@ -69,6 +71,7 @@ class DockingFrame:
     quad: np.ndarray                      # (4, 2) TL, TR, BR, BL of the template rectangle in the image
     nose: np.ndarray                      # (2,) nose in the image
     nose_ground: np.ndarray               # (2,) nose on the apron [m]
+    guidance: np.ndarray                  # (3,) exact distance to go [m], lateral offset [m] (pilot's right +), closing speed [m/s]
     mask: np.ndarray                      # (H, W) float32 aircraft alpha before occluders
     visible: np.ndarray                   # (H, W) float32 aircraft alpha after occluders
     occluded_fraction: float = 0.0
@@ -221,6 +224,8 @@ class DockingScene:
         self.path_s, self.path_xy, self.path_psi = s[: i_start + 1], xy[: i_start + 1], psi[: i_start + 1]
         self.paint_xy = xy                                   # the painted line runs on beyond the start
         self.n_move = max(n_move, 2)
+        # its own stream, so that scenes without a lateral offset stay as they were
+        self.sway_phase = float(np.random.default_rng([self.seed, 3]).uniform(0, 2 * np.pi))
         self.sprite, self.sprite_alpha = draw_aircraft(rng)
         self.background = self._draw_background(rng)
         self._plan_occluders(rng)
@@ -234,12 +239,34 @@ class DockingScene:
         u = min(index / (self.n_move - 1), 1.0)
         return float(self.path_s[-1] * (1.0 - u) ** 1.6)
 
+    def closing_speed(self, index: int) -> float:
+        """Minus the rate of :meth:`arc_length` [m/s] (0 once standing)."""
+        u = index / (self.n_move - 1)
+        if u >= 1.0:
+            return 0.0
+        return float(1.6 * self.path_s[-1] * (1.0 - u) ** 0.6 * self.config.fps / (self.n_move - 1))
+
+    def guidance_truth(self) -> np.ndarray:
+        """(frames, 3): every frame's exact distance to go along the line [m], lateral offset [m, the pilot's
+        right +] and closing speed [m/s] (``DockingFrame.guidance``, without rendering)."""
+        return np.array([[self.arc_length(i), self.lateral_offset(self.arc_length(i)), self.closing_speed(i)]
+                         for i in range(self.config.frames)])
+
+    def lateral_offset(self, s: float) -> float:
+        """The nose's offset from the line at arc length ``s`` [m], positive to the pilot's right: a sway of
+        ``lateral_offset_m`` over ~40 m of path that shrinks to 30 % of it at the stop."""
+        amplitude = self.config.lateral_offset_m
+        return float(amplitude * np.sin(2 * np.pi * s / 40.0 + self.sway_phase) * (0.3 + 0.7 * min(s / 30.0, 1.0)))
+
     def pose(self, index: int) -> tuple[np.ndarray, np.ndarray, float]:
         """``(affine 3x3 template -> image, nose on the ground [m], heading deviation [rad])``."""
         s = self.arc_length(index)
         x = np.interp(s, self.path_s, self.path_xy[:, 0])
         y = np.interp(s, self.path_s, self.path_xy[:, 1])
         psi = float(np.interp(s, self.path_s, self.path_psi))
+        if self.config.lateral_offset_m:   # the pilot's right, driving towards the stop: (-cos psi, sin psi)
+            offset = self.lateral_offset(s)
+            x, y = x - offset * np.cos(psi), y + offset * np.sin(psi)
         nose3 = np.array([x, y, NOSE_HEIGHT_M])
         nose_img = self.camera.project(nose3)[0]
         scale = self.camera.f / float(self.camera.depth(nose3)[0]) * M_PER_TPL
@@ -375,6 +402,7 @@ class DockingScene:
         rng = np.random.default_rng([self.seed, 2])
         h, w = cfg.height, cfg.width
         glare = render.sun_glare((h, w), self.sun, 0.25 * w) if self.weather == "low_sun" else None
+        truth = self.guidance_truth()
         for i in range(cfg.frames):
             affine, nose_ground, _ = self.pose(i)
             img = self.background.copy()
@@ -404,8 +432,33 @@ class DockingScene:
             quad = apply_affine(affine, template_corners())
             area = float(mask.sum())
             yield DockingFrame(i, render.frame_stamp_ns(i, cfg.fps), img, affine, quad,
-                               apply_affine(affine, NOSE_TPL)[0], nose_ground, mask, visible,
+                               apply_affine(affine, NOSE_TPL)[0], nose_ground, truth[i], mask, visible,
                                1.0 - float(visible.sum()) / area if area > 0 else 1.0)
+
+    def stand_calibration(self, click_sigma_px: float = 0.5) -> dict:
+        """What a surveyor would write in this stand's file (``config/stands/*.yaml`` layout,
+        :mod:`aircraft_docking_tracker.docking.stand`): the measured focal length, ten apron marks (on the stop
+        stop bar's line and slab-joint crossings) clicked in the image with ``click_sigma_px`` of
+        error, the painted lead-in line (entry first, running 10 m on past the stop) and the one aircraft type.
+        The marks span the apron's depth from 20 m before the stop to 30 m past it: the camera's pose, and
+        with it every range, is as good as their spread."""
+        cam = self.camera
+        marks = np.array([[x, y] for y in (-20.0, -10.0, 0.0, 15.0, 30.0) for x in (-7.5, 7.5)])
+        clicked = cam.project(np.c_[marks, np.zeros(len(marks))])
+        clicked += np.random.default_rng([self.seed, 4]).normal(0.0, click_sigma_px, clicked.shape)
+        lead = self.path_xy[:: max(1, len(self.path_xy) // 60)][::-1]
+        lead = np.vstack([lead[:-1], [0.0, 0.0], [0.0, -10.0]])
+        return {
+            "stand": f"synthetic stand {self.seed}",
+            "camera": {"image_size": [self.config.width, self.config.height], "focal_px": round(float(cam.f), 3),
+                       "points": [{"image": np.round(c, 2).tolist(), "stand": m.tolist()}
+                                  for c, m in zip(clicked, marks)]},
+            "lead_in": np.round(lead, 3).tolist(),
+            "aircraft": {"synthetic_a320": {
+                "stop_m": [0.0, 0.0], "nose_height_m": round(float(NOSE_HEIGHT_M), 4),
+                "height_m": round(TEMPLATE_H * M_PER_TPL, 4), "wingspan_m": WINGSPAN_M,
+                "nose_in_template": [float(NOSE_TPL[0] / TEMPLATE_W), float(NOSE_TPL[1] / TEMPLATE_H)]}},
+        }
 
     def stand_json(self) -> str:
         return json.dumps(self.stand_geometry())

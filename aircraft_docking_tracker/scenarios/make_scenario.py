@@ -4,7 +4,9 @@
     make_scenario --kind uav --seed 7 --out uav7.mcap --detections [--difficulty 2]
 
 Topics (every message stamped with its frame's time, frame_id "camera"):
-docking: ``image``, ``ground_truth/polygon``, ``ground_truth/nose``, ``ground_truth/stand`` (once);
+docking: ``image``, ``ground_truth/polygon``, ``ground_truth/nose``, ``ground_truth/guidance`` (one
+``GUIDANCE_DTYPE`` row: the exact distance to go, lateral offset, closing speed and the state a perfect
+guidance shows), ``ground_truth/stand`` (once); ``--stand-file`` also writes the stand's calibration file;
 uav: ``image``, ``ground_truth`` (TRACK_DTYPE rows, see ``scenarios.uav``), and with
 ``--detections`` also ``detections`` synthesised from the ground truth.
 """
@@ -28,16 +30,21 @@ from aircraft_docking_tracker.scenarios.uav import UavScene, UavSceneConfig, syn
 def write_docking_bag(scene: DockingScene, path: str | Path, progress: bool = True, overwrite: bool = False,
                       keep_every: int = 0) -> dict:
     """Render ``scene`` into a bag at ``path``; returns a summary (and every ``keep_every``-th frame)."""
+    from aircraft_docking_tracker.docking.guidance import true_guidance  # noqa: PLC0415
+
     kept = []
     with BagWriter(path, overwrite=overwrite) as bag:
+        guidance = None
         for frame in tqdm(scene.frames(), total=scene.config.frames, desc=f"docking seed {scene.seed}",
                           disable=not progress, unit="frame"):
             hdr = m.header(frame.stamp_ns)
             if frame.index == 0:
+                guidance = true_guidance(*scene.guidance_truth().T)
                 bag.write(m.GT_STAND, m.string_msg(scene.stand_json()), frame.stamp_ns)
             bag.write(m.IMAGE, m.image_msg(frame.image, hdr), frame.stamp_ns)
             bag.write(m.GT_POLYGON, m.quad_to_polygon(frame.quad, hdr), frame.stamp_ns)
             bag.write(m.GT_NOSE, m.point_msg(frame.nose, hdr), frame.stamp_ns)
+            bag.write(m.GT_GUIDANCE, m.cloud_msg(guidance[frame.index:frame.index + 1], hdr), frame.stamp_ns)
             if keep_every and frame.index % keep_every == 0:
                 kept.append(frame)
         counts = bag.topic_counts
@@ -80,6 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--jitter", type=float, default=2.0, help="uav detections: corner jitter [px]")
     parser.add_argument("--strip", help="also write a PNG strip of 6 frames with the ground truth drawn")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--stand-file", help="docking: also write the stand's calibration file (YAML) here, as a "
+                        "surveyor would (ten apron marks clicked to 0.5 px, the lead-in line, the aircraft type)")
     add_config_arguments(parser, DockingSceneConfig)
     add_config_arguments(parser, UavSceneConfig)
     # options both kinds share, with both defaults in the help (these replace the per-kind ones)
@@ -98,6 +107,10 @@ def main(argv=None) -> int:
             scene = DockingScene(config_from_arguments(DockingSceneConfig, args), args.seed)
             keep = max(1, scene.config.frames // 6) if args.strip else 0
             result = write_docking_bag(scene, args.out, not args.quiet, args.overwrite, keep)
+            if args.stand_file:
+                from aircraft_docking_tracker.docking.stand import stand_file_text  # noqa: PLC0415
+
+                Path(args.stand_file).write_text(stand_file_text(scene.stand_calibration()))
         else:
             scene = UavScene(config_from_arguments(UavSceneConfig, args), args.seed)
             keep = max(1, scene.config.frames // 6) if args.strip else 0

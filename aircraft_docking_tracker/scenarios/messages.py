@@ -21,10 +21,12 @@ DETECTIONS = "detections"
 TRACKS = "tracks"
 DOCKING_POLYGON = "docking/polygon"
 DOCKING_STATE = "docking/state"
+DOCKING_GUIDANCE = "docking/guidance"
 GROUND_TRUTH = "ground_truth"
 GT_POLYGON = "ground_truth/polygon"
 GT_NOSE = "ground_truth/nose"
 GT_STAND = "ground_truth/stand"
+GT_GUIDANCE = "ground_truth/guidance"
 
 
 def header(stamp_ns: int, frame_id: str = FRAME_ID):

@@ -1,0 +1,259 @@
+"""Stand calibration: the stand camera, the lead-in line, the stop marks and the aircraft types (no ROS).
+
+A stand file (``config/stands/*.yaml``, documented there) holds what a surveyor measures once per stand:
+
+* **camera**: ``image_size``, optionally ``focal_px`` (square pixels) and ``principal_point``, and at
+  least 4 **apron marks**, each an image point [px] with its stand coordinates [m] on the apron (z = 0).
+  The camera's pose comes from the marks (``cv2.solvePnP``, planar). Without ``focal_px`` the focal
+  length is estimated from the marks' ground-plane homography (Zhang's orthogonality constraints
+  with square pixels and the principal point known: the image centre unless given) -- the usual
+  single-view calibration; a measured focal length is better and is used when given.
+* **lead_in**: the lead-in line as a polyline [m], in the order the aircraft drives it (entry first).
+* **aircraft**: per type, the stop mark (a point [m] on or near the line; the distance to go is measured
+  along the line to its foot), the nose height above the apron [m], the tracked template's height
+  [m] (ground to fin top: the extent a tracked quadrilateral's vertical sides span, which a turn does
+  not shorten), the wingspan [m], and where the nose sits in the tracked template
+  (``nose_in_template``: fractions of its width and height).
+
+Stand frame: metres, z up; any origin and axes on the apron (the marks fix them). Every check
+raises :class:`~aircraft_docking_tracker.config.ConfigError` with the key path in the message.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..config import ConfigError
+
+
+@dataclass(frozen=True)
+class AircraftType:
+    """One aircraft type's stop mark and dimensions (stand file ``aircraft.<name>``)."""
+
+    name: str
+    stop_m: np.ndarray                 # (2,) stop mark [m]
+    nose_height_m: float
+    height_m: float                    # tracked template's vertical extent [m]
+    wingspan_m: float
+    nose_in_template: np.ndarray       # (2,) fractions of the template's width, height
+
+
+class StandCamera:
+    """A calibrated pinhole camera: K, R (stand -> camera), centre C [m]; rays and projections."""
+
+    def __init__(self, K: np.ndarray, R: np.ndarray, centre: np.ndarray, image_size):
+        self.K, self.R, self.centre = K, R, centre
+        self.K_inv = np.linalg.inv(K)
+        self.image_size = tuple(int(v) for v in image_size)
+
+    @property
+    def focal_px(self) -> float:
+        return float(self.K[0, 0])
+
+    def project(self, points) -> np.ndarray:
+        """Stand points (N, 3) [m] -> image points (N, 2) [px]."""
+        cam = (np.atleast_2d(points) - self.centre) @ self.R.T
+        uv = cam @ self.K.T
+        return uv[:, :2] / uv[:, 2:3]
+
+    def rays(self, pixels) -> np.ndarray:
+        """Directions in the stand frame (N, 3) of image points, scaled to unit depth along the optical axis."""
+        pixels = np.atleast_2d(np.asarray(pixels, np.float64))
+        cam = np.c_[pixels, np.ones(len(pixels))] @ self.K_inv.T
+        return cam @ self.R
+
+    def depth_on_plane(self, pixels, height_m: float) -> np.ndarray:
+        """Depth along the optical axis at which each pixel's ray meets the plane z = ``height_m``
+        (NaN where it meets it behind the camera or not at all)."""
+        rays = self.rays(pixels)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            depth = (height_m - self.centre[2]) / rays[:, 2]
+        return np.where(depth > 0, depth, np.nan)
+
+    def point_at_depth(self, pixels, depth) -> np.ndarray:
+        """Stand points (N, 3) on each pixel's ray at the given optical-axis depth."""
+        return self.centre + self.rays(pixels) * np.reshape(depth, (-1, 1))
+
+
+@dataclass(frozen=True)
+class StandCalibration:
+    """A stand: its camera, its lead-in line and its aircraft types."""
+
+    name: str
+    camera: StandCamera
+    lead_in: np.ndarray                # (M, 2) [m], entry first
+    aircraft: dict                     # name -> AircraftType
+    reprojection_px: float             # RMS reprojection error of the apron marks
+
+    def aircraft_type(self, name: str) -> AircraftType:
+        if name not in self.aircraft:
+            raise ConfigError(f"stand {self.name!r} has no aircraft type {name!r} (has {sorted(self.aircraft)})",
+                              ("aircraft_type",))
+        return self.aircraft[name]
+
+
+def focal_from_homography(H: np.ndarray, principal_point) -> float:
+    """Focal length [px] from a plane-to-image homography, square pixels and a known principal point
+    (Zhang 2000: the plane's axes r1, r2 are orthogonal and of equal length). NaN when the two
+    constraints cannot fix it (a camera looking straight along the plane's axes and square onto it)."""
+    T = np.array([[1.0, 0.0, -principal_point[0]], [0.0, 1.0, -principal_point[1]], [0.0, 0.0, 1.0]])
+    h = T @ H
+    h1, h2 = h[:, 0], h[:, 1]
+    # h1' W h2 = 0 and h1' W h1 = h2' W h2 with W = diag(1/f^2, 1/f^2, 1): linear in u = 1/f^2
+    a = np.array([h1[0] * h2[0] + h1[1] * h2[1], h1[0] ** 2 + h1[1] ** 2 - h2[0] ** 2 - h2[1] ** 2])
+    b = np.array([-h1[2] * h2[2], h2[2] ** 2 - h1[2] ** 2])
+    denominator = float(a @ a)
+    if denominator <= 0:
+        return float("nan")
+    u = float(a @ b) / denominator
+    return 1.0 / np.sqrt(u) if u > 0 else float("nan")
+
+
+def _points(value, key: str, count: int | None = None, dims: int = 2) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{key}: {value!r} is not a list of numbers", (key,)) from None
+    if array.ndim == 1:
+        array = array.reshape(1, -1) if count == 1 else array
+    if array.ndim != 2 or array.shape[1] != dims or (count is not None and len(array) != count):
+        want = f"{count} point(s)" if count else "a list of points"
+        raise ConfigError(f"{key}: needs {want} of {dims} numbers, got {value!r}", (key,))
+    if not np.isfinite(array).all():
+        raise ConfigError(f"{key}: has a value that is not a finite number", (key,))
+    return array
+
+
+def _positive(table: dict, key: str, path: str) -> float:
+    value = table.get(key)
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value) or value <= 0:
+        raise ConfigError(f"{path}.{key}: needs a positive number, got {value!r}", (f"{path}.{key}",))
+    return float(value)
+
+
+def calibrate_camera(table: dict) -> tuple[StandCamera, float]:
+    """The ``camera`` section -> (camera, RMS reprojection error of its marks [px])."""
+    if not isinstance(table, dict):
+        raise ConfigError("camera: needs a mapping (image_size, points, optional focal_px, principal_point)",
+                          ("camera",))
+    size = _points(table.get("image_size"), "camera.image_size", 1)[0]
+    if (size < 1).any():
+        raise ConfigError(f"camera.image_size: {size.tolist()} is not a size", ("camera.image_size",))
+    marks = table.get("points")
+    if not isinstance(marks, list) or len(marks) < 4:
+        raise ConfigError("camera.points: needs at least 4 apron marks {image: [u, v], stand: [x, y]}",
+                          ("camera.points",))
+    image = np.array([_points(m.get("image") if isinstance(m, dict) else None, f"camera.points[{i}].image", 1)[0]
+                      for i, m in enumerate(marks)])
+    ground = np.array([_points(m.get("stand"), f"camera.points[{i}].stand", 1)[0] for i, m in enumerate(marks)])
+    principal = (_points(table["principal_point"], "camera.principal_point", 1)[0]
+                 if table.get("principal_point") is not None else size / 2.0)
+    H, _ = cv2.findHomography(ground, image, 0)
+    spread = np.linalg.svd(ground - ground.mean(axis=0), compute_uv=False)
+    if H is None or spread[1] < 1e-3 * max(spread[0], 1e-9):
+        raise ConfigError("camera.points: the apron marks lie on one line; they must span the apron",
+                          ("camera.points",))
+    focal = table.get("focal_px") or 0.0
+    if not isinstance(focal, (int, float)) or isinstance(focal, bool) or not np.isfinite(focal) or focal < 0:
+        raise ConfigError(f"camera.focal_px: needs a positive number (or 0: estimate it), got {focal!r}",
+                          ("camera.focal_px",))
+    if focal == 0:
+        focal = focal_from_homography(H, principal)
+        if not np.isfinite(focal):
+            raise ConfigError("camera.focal_px: cannot be estimated from these marks (the camera looks square "
+                              "onto the stand axes); give the measured focal length", ("camera.focal_px",))
+    K = np.array([[focal, 0.0, principal[0]], [0.0, focal, principal[1]], [0.0, 0.0, 1.0]])
+    object_points = np.c_[ground, np.zeros(len(ground))]
+    ok, rvec, tvec = cv2.solvePnP(object_points, image, K, None, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        raise ConfigError("camera.points: no camera pose fits these apron marks", ("camera.points",))
+    R = cv2.Rodrigues(rvec)[0]
+    centre = (-R.T @ tvec).ravel()
+    if centre[2] <= 0:           # IPPE's planar ambiguity: the mirror pose below the apron
+        raise ConfigError("camera.points: the pose found puts the camera below the apron; check the marks",
+                          ("camera.points",))
+    camera = StandCamera(K, R, centre, size)
+    error = float(np.sqrt(np.mean(np.sum((camera.project(object_points) - image) ** 2, axis=1))))
+    return camera, error
+
+
+def parse_stand(data: dict, name: str = "stand") -> StandCalibration:
+    """A stand file's mapping -> :class:`StandCalibration` (every field checked)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{name}: a stand file holds a mapping (camera, lead_in, aircraft)", ())
+    camera, error = calibrate_camera(data.get("camera"))
+    lead_in = _points(data.get("lead_in"), "lead_in")
+    if len(lead_in) < 2 or np.linalg.norm(np.diff(lead_in, axis=0), axis=1).min() <= 0:
+        raise ConfigError("lead_in: needs at least 2 distinct points [m], entry first", ("lead_in",))
+    types = data.get("aircraft")
+    if not isinstance(types, dict) or not types:
+        raise ConfigError("aircraft: needs at least one aircraft type", ("aircraft",))
+    aircraft = {}
+    for type_name, entry in types.items():
+        path = f"aircraft.{type_name}"
+        if not isinstance(entry, dict):
+            raise ConfigError(f"{path}: needs a mapping (stop_m, nose_height_m, height_m, wingspan_m, "
+                              "nose_in_template)", (path,))
+        nose = _points(entry.get("nose_in_template"), f"{path}.nose_in_template", 1)[0]
+        if ((nose < 0) | (nose > 1)).any():
+            raise ConfigError(f"{path}.nose_in_template: fractions in [0, 1], got {nose.tolist()}",
+                              (f"{path}.nose_in_template",))
+        aircraft[str(type_name)] = AircraftType(
+            str(type_name), _points(entry.get("stop_m"), f"{path}.stop_m", 1)[0],
+            _positive(entry, "nose_height_m", path), _positive(entry, "height_m", path),
+            _positive(entry, "wingspan_m", path), nose)
+    return StandCalibration(str(data.get("stand", name)), camera, lead_in, aircraft, error)
+
+
+def load_stand(path: str | Path) -> StandCalibration:
+    """Read and check a stand file; a relative name is looked up in the package's ``config/stands``."""
+    import yaml  # noqa: PLC0415
+
+    from ..config import package_config_dir  # noqa: PLC0415
+
+    path = Path(path)
+    if not path.is_file() and not path.is_absolute() and (package_config_dir() / "stands" / path).is_file():
+        path = package_config_dir() / "stands" / path
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise ConfigError(f"stand file {path}: {exc.strerror or exc}", ("stand_file",)) from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"stand file {path}: not YAML ({exc})", ("stand_file",)) from None
+    try:
+        return parse_stand(data, path.stem)
+    except ConfigError as exc:
+        raise ConfigError(f"stand file {path}: {exc}", exc.fields) from None
+
+
+STAND_FILE_HEADER = """\
+# Stand calibration (aircraft_docking_tracker.docking.stand; how to make one: README, "Calibrating a stand").
+# Stand frame: metres on the apron, z up; any origin and axes (the apron marks below fix them).
+#
+# camera:
+#   image_size: [width, height] of the camera's images [px]
+#   focal_px: focal length [px, square pixels] from the lens' calibration; 0: estimated from the marks
+#   principal_point: [cx, cy] [px]; leave out: the image centre
+#   points: >= 4 apron marks not all on one line (paint corners, stop bar ends, slab-joint crossings):
+#     image: [u, v] where the mark is in the camera's image [px]; stand: [x, y] its surveyed position [m]
+# lead_in: the painted lead-in line as a polyline [m], in the order the aircraft drives it (entry first);
+#   let it run on a few metres past the last stop mark, so that an overshoot is measured along it
+# aircraft: per type (the guidance's aircraft_type parameter picks one)
+#   stop_m: [x, y] the type's stop mark [m]; the distance to go is measured along the line to its foot
+#   nose_height_m: the nose's height above the apron [m] (where the tracker's nose point is)
+#   height_m: the tracked template's height, ground to fin top [m] (range from the apparent size)
+#   wingspan_m: wingspan [m]
+#   nose_in_template: [u, v] where the nose sits in the tracked template, fractions of its width and height
+"""
+
+
+def stand_file_text(data: dict) -> str:
+    """A stand mapping (as :func:`parse_stand` reads it) as a documented YAML stand file; checked first."""
+    import yaml  # noqa: PLC0415
+
+    parse_stand(data)
+    body = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110)
+    return STAND_FILE_HEADER + body

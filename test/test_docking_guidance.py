@@ -1,0 +1,168 @@
+"""Stand calibration and docking guidance cores (issue 15): geometry against the synthetic stand's exact
+truth, the fusion of the two ranges, the display states, and clear errors for bad stand files."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker.config import ConfigError
+from aircraft_docking_tracker.docking.guidance import (LOST, NO_AIRCRAFT, OVERSHOOT, SLOW_DOWN, STOP, TRACKING,
+                                                       DockingGuidance, GuidanceConfig, along_line, locate_nose,
+                                                       template_point)
+from aircraft_docking_tracker.docking.stand import focal_from_homography, load_stand, parse_stand
+from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig, apply_affine, template_corners
+from aircraft_docking_tracker.scenarios.render import frame_stamp_ns
+
+NS = 1_000_000_000
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """600 frames at 14 Hz: about 3 m/s 15 m out, as an aircraft closes (80 frames would be 30 m/s)."""
+    return DockingScene(DockingSceneConfig(frames=600, lateral_offset_m=1.0, camera_height_m=8.0,
+                                           camera_distance_m=50.0), seed=7)
+
+
+@pytest.fixture(scope="module")
+def frames(scene):
+    """(true quadrilateral, true guidance, stamp, nose on the apron) per frame, from the scene's poses (the
+    images are not needed)."""
+    truth = scene.guidance_truth()
+    out = []
+    for i in range(scene.config.frames):
+        affine, nose_ground, _ = scene.pose(i)
+        out.append((apply_affine(affine, template_corners()), truth[i], frame_stamp_ns(i, scene.config.fps),
+                    nose_ground))
+    return out
+
+
+def test_calibration_recovers_the_camera_from_clicked_marks(scene):
+    stand = parse_stand(scene.stand_calibration(click_sigma_px=0.5))
+    truth = scene.camera.position
+    assert np.linalg.norm(stand.camera.centre - truth) < 0.5          # 6 marks clicked to 0.5 px, 50 m away
+    assert stand.reprojection_px < 1.5
+    exact = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
+    assert np.linalg.norm(exact.camera.centre - truth) < 0.01          # the marks are written to 0.01 px
+    assert exact.camera.project([[3.0, 20.0, 1.0]]) == pytest.approx(scene.camera.project([[3.0, 20.0, 1.0]]),
+                                                                     abs=0.02)
+
+
+def test_focal_length_estimated_from_the_marks_when_not_given(scene):
+    data = scene.stand_calibration(click_sigma_px=0.0)
+    data["camera"]["focal_px"] = 0
+    assert parse_stand(data).camera.focal_px == pytest.approx(scene.camera.f, rel=0.01)
+    # a camera square onto the stand's axes (no pitch, no yaw) leaves the focal length free
+    assert np.isnan(focal_from_homography(np.diag([500.0, 500.0, 1.0]), (0.0, 0.0)))
+
+
+def test_pilot_sees_positive_lateral_to_his_right():
+    line = np.array([[0.0, 50.0], [0.0, 0.0], [0.0, -10.0]])   # driving towards -y, the camera's way
+    arc, lateral = along_line(line, [-0.4, 20.0])                # the camera's left is the pilot's right
+    assert arc == pytest.approx(30.0) and lateral == pytest.approx(0.4)
+    arc, lateral = along_line(line, [0.2, -15.0])                # past the end: the last segment extended
+    assert arc == pytest.approx(65.0) and lateral == pytest.approx(-0.2)
+
+
+def test_true_quadrilaterals_give_the_true_guidance(scene, frames):
+    """Fed the exact quadrilaterals, the geometry alone errs by what the 0.5 px clicks leave (0.17 m here)."""
+    guidance = DockingGuidance(parse_stand(scene.stand_calibration()))
+    errors = []
+    for quad, truth, _, nose_ground in frames:
+        result, sigma = guidance.measure(quad)
+        assert sigma > 0
+        if truth[0] <= 15.0:
+            errors.append([result.distance_m - truth[0], result.lateral_m - truth[1]])
+            assert result.nose_stand[:2] == pytest.approx(nose_ground, abs=0.25)
+    errors = np.abs(np.array(errors))
+    assert len(errors) > 15
+    assert errors[:, 0].max() < 0.25 and errors[:, 1].max() < 0.1
+
+
+def test_fusion_leans_on_the_range_that_holds(scene, frames):
+    """A 10 % size error at 50 m moves the size range by metres; the fused depth follows the ground plane
+    more when the pixel error is small, and the size more when the pixels are not trusted."""
+    stand = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
+    aircraft = stand.aircraft_type("synthetic_a320")
+    quad = frames[-1][0]
+    centre = template_point(quad, aircraft.nose_in_template)
+    shrunk = centre + (quad - centre) / 1.1                       # the same nose, a template 10 % too small
+    _, _, ground, size, _ = locate_nose(stand, aircraft, shrunk, 1.0, 0.03)
+    true_depth = scene.camera.depth([[*frames[-1][3], aircraft.nose_height_m]])[0]
+    assert ground == pytest.approx(true_depth, rel=0.01) and size == pytest.approx(1.1 * true_depth, rel=0.01)
+    trust_pixels = locate_nose(stand, aircraft, shrunk, 0.2, 0.03)[1]
+    trust_size = locate_nose(stand, aircraft, shrunk, 20.0, 0.03)[1]
+    depth = lambda p: float(stand.camera.R[2] @ (p - stand.camera.centre))   # noqa: E731
+    assert abs(depth(trust_pixels) - true_depth) < 0.3 * abs(depth(trust_size) - true_depth)
+
+
+def test_states_through_an_approach(scene, frames):
+    guidance = DockingGuidance(parse_stand(scene.stand_calibration()))
+    assert guidance.update(None, False, False, 0).state == NO_AIRCRAFT
+    states, firsts = [], {}
+    for i, (quad, truth, stamp, _) in enumerate(frames):
+        r = guidance.update(quad, True, False, stamp)
+        states.append(r.state)
+        firsts.setdefault(r.state, truth[0])
+        assert np.isfinite([r.distance_m, r.lateral_m, r.speed_mps]).all()
+    assert states[0] == TRACKING and states[-1] == STOP
+    assert 14.5 <= firsts[SLOW_DOWN] <= 16.0                        # slow down shown at 15 m (the smoothing's lag)
+    assert -0.5 <= firsts[STOP] <= 0.5                              # STOP neither late nor early
+    assert OVERSHOOT not in states                                  # braking to the mark is not "too far"
+    # order on the way in: tracking, slow down, STOP; never back out to tracking
+    assert np.all(np.diff([{TRACKING: 0, SLOW_DOWN: 1, STOP: 2}[s] for s in states]) >= 0)
+
+
+def test_speed_is_the_closing_speed(scene, frames):
+    guidance = DockingGuidance(parse_stand(scene.stand_calibration(click_sigma_px=0.0)))
+    speeds = [(guidance.update(q, True, False, s).speed_mps, t[2]) for q, t, s, _ in frames]
+    measured, truth = np.array(speeds[5:]).T
+    assert np.median(np.abs(measured - truth)) < 0.05 * truth.max()
+    assert abs(measured[-1]) < 0.1                                  # standing at the stop
+
+
+def test_overshoot_lost_and_time_jump(scene, frames):
+    stand = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
+    guidance = DockingGuidance(stand)
+    quad = frames[-1][0]
+    past = quad + np.array([0.0, 0.0]) + (quad - quad.mean(axis=0)) * 0.08      # 8 % larger: metres nearer
+    for k in range(20):
+        state = guidance.update(past, True, False, k * NS // 14).state
+    assert state == OVERSHOOT
+    lost = guidance.update(past, False, True, 21 * NS // 14)
+    assert lost.state == LOST and np.isnan(lost.distance_m)
+    guidance.update(quad, True, False, 22 * NS // 14)
+    guidance.update(quad, True, False, 10 * NS)                  # a 9 s gap: the smoothing restarts
+    guidance.update(quad, True, False, 5 * NS)                   # a stamp going back: again
+    assert guidance.restarts == 2
+
+
+def test_broken_stand_files_say_what_is_wrong(scene, tmp_path):
+    good = scene.stand_calibration()
+    cases = [
+        (lambda d: d["camera"].update(points=d["camera"]["points"][:3]), "at least 4 apron marks"),
+        (lambda d: d["camera"]["points"][1].update(stand=[float("nan"), 0.0]), "camera.points[1].stand"),
+        (lambda d: [p.update(stand=[0.0, float(i)]) for i, p in enumerate(d["camera"]["points"])], "on one line"),
+        (lambda d: d.update(lead_in=[[0.0, 1.0]]), "lead_in"),
+        (lambda d: d["aircraft"]["synthetic_a320"].update(height_m=-3), "aircraft.synthetic_a320.height_m"),
+        (lambda d: d["aircraft"]["synthetic_a320"].update(nose_in_template=[0.5, 1.5]), "nose_in_template"),
+        (lambda d: d["camera"].update(focal_px="wide"), "camera.focal_px"),
+    ]
+    for breaks, message in cases:
+        data = copy.deepcopy(good)
+        breaks(data)
+        with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):
+            parse_stand(data)
+    with pytest.raises(ConfigError, match="no aircraft type 'B777'"):
+        DockingGuidance(parse_stand(good), GuidanceConfig(aircraft_type="B777"))
+    with pytest.raises(ConfigError, match="not YAML"):
+        (tmp_path / "bad.yaml").write_text("camera: [unclosed\n")
+        load_stand(tmp_path / "bad.yaml")
+    with pytest.raises(ConfigError, match="No such file"):
+        load_stand(tmp_path / "missing.yaml")
+
+
+def test_shipped_stand_file_loads():
+    stand = load_stand("demo_stand.yaml")
+    assert stand.reprojection_px < 1.5 and "synthetic_a320" in stand.aircraft
