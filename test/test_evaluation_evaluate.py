@@ -186,3 +186,31 @@ def test_topics_of_live_recordings_resolve_to_the_agreed_names():
     assert ev.resolve_topics(two, ("tracks",), "cam1") == {"/cam1/tracks": "tracks"}
     assert ev.resolve_topics({"docking/polygon": 0, "ground_truth/polygon": 0}, ("docking/polygon",)) == \
         {"docking/polygon": "docking/polygon"}
+
+
+def test_guidance_scored_against_its_ground_truth(tmp_path):
+    """docking/guidance against ground_truth/guidance: errors within the last 15 m, where STOP was first shown, the
+    state accuracy; a frame without output holds the last row; the report's table and plot."""
+    from aircraft_docking_tracker.docking.guidance import true_guidance
+
+    distances = np.array([40.0, 20.0, 14.0, 8.0, 3.0, 1.2, 0.4, 0.0, 0.0, 0.0])
+    truth = true_guidance(distances, np.full(10, 0.1), np.r_[-np.diff(distances) * 10, 0.0])
+    shown = truth.copy()
+    shown["distance_m"] += 0.2                                    # 0.2 m long throughout
+    shown["lateral_m"] -= np.linspace(0.0, 0.45, 10)
+    shown["state"][5] = 3                                         # STOP 1.2 m early (1.4 m shown)
+    rows = [shown[k:k + 1] for k in range(10)]
+    rows[8] = None                                                # no output: holds frame 7's row
+    bag = _write(tmp_path / "g.mcap", {m.GT_GUIDANCE: [truth[k:k + 1] for k in range(10)],
+                                       m.DOCKING_GUIDANCE: rows})
+    g = ev.evaluate_bags(bag)["guidance"]
+    assert g["frames"] == 10 and g["missing_frames"] == 1 and g["near_frames"] == 8
+    assert g["distance_near_median"] == pytest.approx(0.2, abs=1e-5) and g["distance_near_p95"] == pytest.approx(0.2, abs=1e-5)
+    held = np.linspace(0.0, 0.45, 10)
+    held[8] = held[7]
+    assert g["lateral_near_p95"] == pytest.approx(np.percentile(held[2:], 95), abs=1e-5)
+    assert g["stop_frame"] == 5 and g["stop_at_m"] == pytest.approx(1.2) and g["stop_early"] and not g["stop_within"]
+    assert g["state_accuracy"] == pytest.approx(0.9)             # frame 5 shows STOP where the truth shows slow down
+    text = ev.report.format_report({"run": {"guidance": g}})
+    assert "docking guidance" in text and "1.20" in text
+    assert ev.write_plots({"run": {"guidance": g}}, tmp_path)[0].name == "guidance_errors.png"

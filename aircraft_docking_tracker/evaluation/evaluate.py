@@ -10,6 +10,9 @@ The metric family follows from the topics present (output / ground truth):
 * ``docking/polygon`` vs ``ground_truth/polygon`` -> single target (``sot_metrics``: OTB success
   AUC, precision at 20 px, lost frames; polygon IoU; nose error when ``ground_truth/stand`` and
   ``ground_truth/nose`` are there);
+* ``docking/guidance`` vs ``ground_truth/guidance`` -> docking guidance (``guidance_metrics``: lateral and
+  distance errors, median and p95, over the approach and within the last 15 m; where STOP was first shown;
+  state accuracy; plotted over the distance to go);
 * ``tracks`` vs ``ground_truth`` (rows with ``id``) -> multi target (``mot_metrics``: HOTA, DetA, AssA, MOTA, MOTP,
   IDF1, ID switches, fragmentations, MT/ML, seed 003 Fig. 4 continuity);
 * ``detections`` vs ``ground_truth`` -> detection (``detection_metrics``: seed 003 Table 1 rates,
@@ -39,6 +42,7 @@ from tqdm import tqdm
 
 from aircraft_docking_tracker.io.bag import BagReader
 from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments, param, validate
+from aircraft_docking_tracker.docking.guidance import GUIDANCE_DTYPE, template_point
 from aircraft_docking_tracker.evaluation import plots, report
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator, DetectionMetricsConfig
 from aircraft_docking_tracker.evaluation.mot_metrics import MotEvaluator
@@ -49,8 +53,9 @@ from aircraft_docking_tracker.images import to_bgr8
 from aircraft_docking_tracker.object_table import TRACK_DTYPE, cloud_to_table, confident_rows, table_boxes
 from aircraft_docking_tracker.scenarios import strips
 from aircraft_docking_tracker.scenarios.datasets import mot_rows_to_tracks, read_results_regions, read_sot_boxes
-from aircraft_docking_tracker.scenarios.messages import (DETECTIONS, DOCKING_POLYGON, GROUND_TRUTH, GT_NOSE,
-                                                        GT_POLYGON, GT_STAND, IMAGE, TRACKS, polygon_to_quad)
+from aircraft_docking_tracker.scenarios.messages import (DETECTIONS, DOCKING_GUIDANCE, DOCKING_POLYGON, GROUND_TRUTH,
+                                                        GT_GUIDANCE, GT_NOSE, GT_POLYGON, GT_STAND, IMAGE, TRACKS,
+                                                        polygon_to_quad)
 from aircraft_docking_tracker.io import motchallenge
 
 OUTPUT_TOPICS = (DOCKING_POLYGON, TRACKS, DETECTIONS)
@@ -152,9 +157,29 @@ _quad, _table = polygon_to_quad, cloud_to_table
 
 # --- scoring, one family each ---------------------------------------------------------------------
 
-def nose_from_quad(quad: np.ndarray, nose_uv) -> np.ndarray:
-    """The point at template fractions ``(u, v)`` of an affine quadrilateral TL, TR, BR, BL."""
-    return quad[0] + nose_uv[0] * (quad[1] - quad[0]) + nose_uv[1] * (quad[3] - quad[0])
+def score_guidance(gt: dict, out: dict) -> dict:
+    """``docking/guidance`` against ``ground_truth/guidance`` (one row each per stamp; a stamp without
+    output holds the last row, as a display does, and none before the first counts as no figure), with the
+    per-frame true distance to go and errors for the plots over distance."""
+    from aircraft_docking_tracker.evaluation.guidance_metrics import guidance_errors  # noqa: PLC0415
+
+    stamps = sorted(gt)
+    truth = np.concatenate([gt[s][:1] for s in stamps]).astype(GUIDANCE_DTYPE)
+    estimate = np.array([(np.nan, np.nan, np.nan, -1)] * len(stamps), dtype=GUIDANCE_DTYPE)
+    held, missing = None, 0
+    for k, s in enumerate(stamps):
+        if s in out and len(out[s]):
+            held = out[s][0]
+        else:
+            missing += 1
+        if held is not None:
+            estimate[k] = held
+    result = guidance_errors(estimate, truth)
+    result.update({"frames": len(stamps), "missing_frames": missing,
+                   "true_distance_m": truth["distance_m"].tolist(),
+                   "distance_error_m": (estimate["distance_m"] - truth["distance_m"]).tolist(),
+                   "lateral_error_m": (estimate["lateral_m"] - truth["lateral_m"]).tolist()})
+    return result
 
 
 def score_sot(gt: dict, out: dict, cfg: EvaluateConfig, stand: dict | None = None, gt_nose: dict | None = None) -> dict:
@@ -177,7 +202,7 @@ def score_sot(gt: dict, out: dict, cfg: EvaluateConfig, stand: dict | None = Non
     result["missing_policy"] = cfg.missing
     if stand and gt_nose:
         uv = np.array(stand["nose_template"]) / np.array(stand["template_size"], float)
-        err = [np.linalg.norm(nose_from_quad(p, uv) - gt_nose[s]) for p, s in zip(pred, stamps) if s in gt_nose]
+        err = [np.linalg.norm(template_point(p, uv) - gt_nose[s]) for p, s in zip(pred, stamps) if s in gt_nose]
         err = np.array([e for e in err if np.isfinite(e)])
         result["nose_error_median"] = float(np.median(err)) if err.size else float("nan")
         result["nose_error_final"] = float(err[-1]) if err.size else float("nan")
@@ -202,7 +227,7 @@ def stop_errors(final_quad: np.ndarray, final_truth: np.ndarray, final_nose, sta
         area = cv2.contourArea(np.asarray(quad, np.float32).reshape(-1, 1, 2))
         return focal * stand["metres_per_template_px"] / np.sqrt(area / template_area) if area > 0 else np.nan
 
-    tracked = nose_from_quad(final_quad, nose_uv)
+    tracked = template_point(final_quad, nose_uv)
     along = depth(final_quad) - depth(final_truth) if np.isfinite(final_quad).all() else np.nan
     lateral = (tracked[0] - final_nose[0]) * depth(final_truth) / focal
     return {"stop_along_m": float(along), "stop_lateral_m": float(lateral), "stop_error_m": float(np.hypot(along, lateral))}
@@ -324,6 +349,10 @@ def evaluate_streams(out_streams: dict, gt_streams: dict, config: EvaluateConfig
             if GT_NOSE in gt_streams else None
         result["sot"] = score_sot(_decoded(gt_streams, GT_POLYGON, _quad), _decoded(out_streams, DOCKING_POLYGON, _quad),
                                   cfg, stand, nose)
+    if DOCKING_GUIDANCE in out_streams and GT_GUIDANCE in gt_streams:
+        guidance_rows = lambda msg: cloud_to_table(msg, GUIDANCE_DTYPE)  # noqa: E731
+        result["guidance"] = score_guidance(_decoded(gt_streams, GT_GUIDANCE, guidance_rows),
+                                            _decoded(out_streams, DOCKING_GUIDANCE, guidance_rows))
     gt_tables = _decoded(gt_streams, GROUND_TRUTH, _table)
     if TRACKS in out_streams and gt_tables:
         if any("id" not in t.dtype.names for t in gt_tables.values()):
@@ -341,18 +370,18 @@ def evaluate_bags(output_bag: str | Path, gt_bag: str | Path | None = None, conf
                   progress: bool = False) -> dict:
     """Score ``output_bag`` against ``gt_bag`` (default: the ground truth inside ``output_bag``).
 
-    Returns ``{"sot"|"mot"|"detection": metrics, "speed": {...}}`` for the families present;
+    Returns ``{"sot"|"guidance"|"mot"|"detection": metrics, "speed": {...}}`` for the families present;
     raises EvaluationError when no family can be scored.
     """
     cfg = validate(config or EvaluateConfig())
     problems: list[str] = []
-    out_streams = read_streams(output_bag, (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON), progress,
+    out_streams = read_streams(output_bag, (IMAGE, DETECTIONS, TRACKS, DOCKING_POLYGON, DOCKING_GUIDANCE), progress,
                                namespace=cfg.namespace, problems=problems)
     gt_path = gt_bag or output_bag
-    gt_streams = read_streams(gt_path, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND), progress,
+    gt_streams = read_streams(gt_path, (GROUND_TRUTH, GT_POLYGON, GT_NOSE, GT_STAND, GT_GUIDANCE), progress,
                               namespace=cfg.namespace, problems=problems)
     result = evaluate_streams(out_streams, gt_streams, cfg)
-    if not {"sot", "mot", "detection"} & set(result):
+    if not {"sot", "mot", "detection", "guidance"} & set(result):
         raise EvaluationError(f"nothing to score: output topics {sorted(out_streams)}, ground truth topics "
                               f"{sorted(gt_streams)} in {gt_path}")
     result["inputs"] = {"output": str(output_bag), "ground_truth": str(gt_path),
@@ -422,6 +451,9 @@ def write_plots(results: dict, folder: str | Path) -> list[Path]:
     if sot:
         written.append(plots.success_precision_plot(sot, folder / "success_precision.png"))
         written.append(plots.iou_over_time_plot(sot, folder / "iou_over_time.png"))
+    guidance = {name: r["guidance"] for name, r in results.items() if "guidance" in r}
+    if guidance:
+        written.append(plots.guidance_error_plot(guidance, folder / "guidance_errors.png"))
     mot = {name: r["mot"] for name, r in results.items() if "mot" in r}
     if mot:
         written.append(plots.continuity_bars({n: m["continuity"] for n, m in mot.items()}, folder / "continuity.png"))

@@ -66,6 +66,31 @@ def iou_over_time_plot(runs: dict, path: str | Path, title: str = "") -> Path:
     return _save(fig, path)
 
 
+def guidance_error_plot(runs: dict, path: str | Path, title: str = "", last_m: float = 60.0) -> Path:
+    """Docking guidance: distance and lateral errors over the true distance to go (the last ``last_m``),
+    with issue 15's bands (0.5 m, 0.25 m) and the 15 m line."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharex=True)
+    for name, g in runs.items():
+        d = np.asarray(g["true_distance_m"], float)
+        keep = d <= last_m
+        width = 1.0 if len(runs) <= 8 else 0.6
+        axes[0].plot(d[keep], np.asarray(g["distance_error_m"], float)[keep], lw=width, label=name)
+        axes[1].plot(d[keep], np.asarray(g["lateral_error_m"], float)[keep], lw=width, label=name)
+    for ax, label, band in ((axes[0], "distance error [m]", 0.5), (axes[1], "lateral error [m]", 0.25)):
+        ax.axhspan(-band, band, color="g", alpha=0.12)
+        ax.axvline(15.0, color="k", lw=0.5, ls="--")
+        ax.set_xlabel("true distance to go [m]")
+        ax.set_ylabel(label)
+        ax.set_xlim(last_m, min(-1.0, ax.get_xlim()[1]))
+        ax.grid(alpha=0.3)
+    if len(runs) <= 8:
+        axes[0].legend(fontsize=8)
+    fig.suptitle(title or "Docking guidance errors over the distance to go")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
 def pr_plot(runs: dict, path: str | Path, title: str = "") -> Path:
     """``runs``: name -> ``detection_metrics`` summary dict (pr_precision, pr_recall, AP)."""
     plt = _pyplot()

@@ -15,6 +15,11 @@ COLUMNS = {
             ("lost_frames", "lost", "{:d}"), ("longest_loss", "max loss", "{:d}"),
             ("nose_error_median", "nose px", "{:.1f}"), ("stop_error_m", "stop err m", "{:.2f}"),
             ("missing_outputs", "no output", "{:d}")],
+    "guidance": [("frames", "frames", "{:d}"), ("lateral_near_median", "lat. <15m p50 m", "{:.2f}"),
+                 ("lateral_near_p95", "lat. <15m p95 m", "{:.2f}"), ("distance_near_median", "dist. <15m p50 m", "{:.2f}"),
+                 ("distance_near_p95", "dist. <15m p95 m", "{:.2f}"), ("stop_at_m", "STOP at m", "{:.2f}"),
+                 ("stop_lateral_error_m", "STOP lat. err m", "{:.2f}"), ("state_accuracy", "state acc.", "{:.3f}"),
+                 ("missing_frames", "no output", "{:d}")],
     "mot": [("num_frames", "frames", "{:d}"), ("hota", "HOTA", "{:.3f}"), ("deta", "DetA", "{:.3f}"),
             ("assa", "AssA", "{:.3f}"), ("mota", "MOTA", "{:.3f}"), ("motp", "MOTP", "{:.3f}"),
             ("idf1", "IDF1", "{:.3f}"), ("num_switches", "IDSW", "{:d}"), ("num_fragmentations", "Frag", "{:d}"),
@@ -26,7 +31,8 @@ COLUMNS = {
     "speed": [("count", "msgs", "{:d}"), ("rate_hz", "rate Hz", "{:.2f}"), ("p50_ms", "lat p50 ms", "{:.1f}"),
               ("p95_ms", "p95 ms", "{:.1f}"), ("p99_ms", "p99 ms", "{:.1f}")],
 }
-TITLES = {"sot": "single target (OTB)", "mot": "multi target (HOTA / CLEAR MOT / IDF1)",
+TITLES = {"sot": "single target (OTB)", "guidance": "docking guidance (issue 15; STOP at: true distance to go when "
+          "STOP was first shown)", "mot": "multi target (HOTA / CLEAR MOT / IDF1)",
           "detection": "detection (seed 003 Table 1)", "speed": "speed (per output topic)"}
 
 
