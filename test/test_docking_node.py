@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 import rclpy
 from geometry_msgs.msg import Point32, PolygonStamped
 from rclpy.parameter import Parameter
@@ -15,6 +16,9 @@ from aircraft_docking_tracker.docking import affine_group as ag
 from aircraft_docking_tracker import offline
 from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp, stamp_to_ns
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
+from aircraft_docking_tracker.config import ConfigError
+from aircraft_docking_tracker.docking.guidance import GUIDANCE_DTYPE, GuidanceConfig
+from aircraft_docking_tracker.docking.guidance import TRACKING as GUIDANCE_TRACKING
 from aircraft_docking_tracker.docking.tracker import LOST, STATE_DTYPE, TRACKING, WAITING, DockingConfig
 from aircraft_docking_tracker.docking_tracker_node import (DockingNodeConfig, DockingProcessor,
                                                            DockingTrackerNode)
@@ -46,6 +50,7 @@ def test_yaml_lists_every_parameter_with_its_default():
     expected = {f.name: getattr(DockingConfig(), f.name) for f in dataclasses.fields(DockingConfig)}
     expected.update({"node." + f.name: getattr(DockingNodeConfig(), f.name)
                      for f in dataclasses.fields(DockingNodeConfig)})
+    expected.update({"guidance." + f.name: getattr(GuidanceConfig(), f.name) for f in dataclasses.fields(GuidanceConfig)})
     assert params == expected
 
 
@@ -193,3 +198,37 @@ def test_the_warm_up_track_is_thrown_away_and_its_failure_reported(monkeypatch):
 
     monkeypatch.setattr(DockingTracker, "start", broken)
     assert DockingProcessor(DockingConfig()).warm_up_error == "RuntimeError: kernel cache unreadable"
+
+
+def test_guidance_outputs_with_a_stand_file(tmp_path):
+    """With a stand file the node also publishes docking/guidance (one row, the image's header), its markers in
+    metres on the stand, and the panel on docking/image; a broken stand file stops the start with its reason."""
+    from aircraft_docking_tracker.docking.stand import stand_file_text
+    from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
+
+    scene = DockingScene(DockingSceneConfig(frames=200, width=320, height=240), seed=4)
+    stand = tmp_path / "stand.yaml"
+    stand.write_text(stand_file_text(scene.stand_calibration()))
+    frames = [f for _, f in zip(range(4), scene.frames())]
+    proc = DockingProcessor(DockingConfig(), DockingNodeConfig(annotate_image=True),
+                            GuidanceConfig(stand_file=str(stand)))
+    assert {"docking/guidance", "docking/guidance_markers"} <= set(proc.outputs)
+    stats = ProcessingStats()
+    start = PolygonStamped(header=header(0))                  # the true quadrilateral: the template is the aircraft's
+    start.polygon.points = [Point32(x=float(x), y=float(y)) for x, y in frames[0].quad]
+    process_guarded(proc, "docking/init", start, stats)
+    for k, frame in enumerate(frames):
+        out = dict(process_guarded(proc, "image", numpy_to_image(frame.image, "bgr8", header(k)), stats))
+    row = cloud_to_table(out["docking/guidance"], GUIDANCE_DTYPE)
+    assert len(row) == 1 and row["state"][0] == GUIDANCE_TRACKING and out["docking/guidance"].header == header(3)
+    assert abs(row["distance_m"][0] - frames[-1].guidance[0]) < 0.1 * frames[-1].guidance[0]   # 240 m out: coarse
+    markers = out["docking/guidance_markers"].markers
+    assert {m.header.frame_id for m in markers} == {"stand"} and len(markers) == 5
+    panel = np.frombuffer(bytes(out["docking/image"].data), np.uint8).reshape(240, 320, 3)[8:40, -100:]
+    assert (panel < 30).mean() > 0.5                                          # the dark panel, top right
+    assert proc.status()["guidance state"] == "tracking"
+    proc.reset()
+    assert proc.last_guidance.state == 0
+    (tmp_path / "broken.yaml").write_text("camera: {image_size: [320, 240], points: []}\n")
+    with pytest.raises(ConfigError, match="at least 4 apron marks"):
+        DockingProcessor(DockingConfig(), DockingNodeConfig(), GuidanceConfig(stand_file=str(tmp_path / "broken.yaml")))

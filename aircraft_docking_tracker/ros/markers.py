@@ -171,3 +171,21 @@ def polygon_image_marker(header, ns: str, xy=None, color=(0.1, 1.0, 0.2), width:
     """A closed polygon (pixels) as a LINE_LIST overlay; ``xy`` None: an empty one (clears the overlay)."""
     segments = polygon_segments(xy) if xy is not None else []
     return image_line_list(header, ns, segments, [color] * len(segments), width)
+
+
+def line_strip_marker(header, ns: str, marker_id: int, xyz, color, width: float = 0.2):
+    """An open LINE_STRIP through 3-D points (the header's frame, e.g. metres on a stand)."""
+    from geometry_msgs.msg import Point  # noqa: PLC0415
+    from visualization_msgs.msg import Marker  # noqa: PLC0415
+
+    m = _marker(header, ns, marker_id, Marker.LINE_STRIP, color, width)
+    m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in xyz]
+    return m
+
+
+def sphere_marker(header, ns: str, marker_id: int, xyz, color, diameter: float = 1.0):
+    from visualization_msgs.msg import Marker  # noqa: PLC0415
+
+    m = _marker(header, ns, marker_id, Marker.SPHERE, color, diameter)
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in xyz)
+    return m
