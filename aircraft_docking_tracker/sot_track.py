@@ -4,6 +4,7 @@
     sot_track frames/ --init 70,51,107,87 --method pf --out r.txt     # any image folder
     sot_track video.avi --init 10,20,50,40 --quads quads.txt
     sot_track docking3.mcap --out r.txt          # bag: `image` + first `ground_truth/polygon`
+    sot_track docking3.mcap --guidance.stand-file stand3.yaml --guidance g.csv   # and the docking guidance
 
 Writes one ``x,y,w,h`` per frame (the axis-aligned box of the tracked quadrilateral, 0-based
 pixels, OTB layout; NaN while lost is *not* used: the filter's box is always written) and, with
@@ -11,6 +12,11 @@ pixels, OTB layout; NaN while lost is *not* used: the filter's box is always wri
 TinyTLP ``groundtruth_rect.txt`` beside the frames, or the bag's ``ground_truth/polygon``) it
 prints the OTB success AUC and precision at 20 px. Parameters: ``config/docking_tracker.yaml``
 (``--params-file``) overridden by ``--name value`` options, the very same dataclass as the node.
+
+With a stand file (``--guidance.stand-file``) the run is also guided by the node's guidance core
+(:func:`~aircraft_docking_tracker.docking.guidance.guide_track`, at the bag's image stamps or ``--fps``);
+``--guidance`` writes ``frame,distance_m,lateral_m,speed_mps,state`` per frame, and a bag's
+``ground_truth/guidance`` is scored (``evaluation.guidance_metrics``).
 """
 from __future__ import annotations
 
@@ -27,10 +33,12 @@ from tqdm import tqdm
 
 from .config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from .io.bag import check_outputs
+from .docking.guidance import GuidanceConfig
 from .docking.tracker import DockingConfig, DockingTracker
 from .geometry import quad_to_box
 
 NODE_NAME = "docking_tracker"
+GUIDANCE_PREFIX = "guidance."
 VIDEO_SUFFIXES = (".avi", ".mp4", ".mkv", ".mov", ".webm", ".mpg", ".mpeg")
 
 
@@ -50,6 +58,8 @@ class Sequence:
     name: str = ""
     files: list[Path] = field(default_factory=list)  # what is read: no output may overwrite these
     problem: Callable[[], str | None] = lambda: None  # a truncated or damaged bag, in words
+    stamps: list | None = None                        # a bag's image stamps [ns] (None: frames at --fps)
+    guidance: np.ndarray | None = None                # a bag's ground_truth/guidance rows, by image (NaN: absent)
 
 
 @dataclass
@@ -118,7 +128,9 @@ def _video_sequence(path: Path) -> Sequence:
 def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "ground_truth/polygon") -> Sequence:
     from .io.bag import BagError, BagReader, stamp_to_ns  # noqa: PLC0415
     from .images import to_mono8_or_bgr8  # noqa: PLC0415
-    from .scenarios.messages import polygon_to_quad  # noqa: PLC0415
+    from .docking.guidance import GUIDANCE_DTYPE  # noqa: PLC0415
+    from .object_table import cloud_to_table  # noqa: PLC0415
+    from .scenarios.messages import GT_GUIDANCE, polygon_to_quad  # noqa: PLC0415
 
     reader = BagReader(path)
     topics = {name.lstrip("/"): name for name in reader.topics}
@@ -132,21 +144,27 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
             except BagError:
                 yield None
 
-    gt_by_stamp = {}
+    gt_by_stamp, guidance_by_stamp = {}, {}
     if gt_topic in topics:
         for msg in decoded(topics[gt_topic]):
             if msg is not None:
                 gt_by_stamp[stamp_to_ns(msg.header.stamp)] = polygon_to_quad(msg)
-    stamps = [stamp_to_ns(msg.header.stamp) if msg is not None else None for msg in decoded(topics[image_topic])] \
-        if gt_by_stamp else None
+    if GT_GUIDANCE in topics:
+        for msg in decoded(topics[GT_GUIDANCE]):
+            if msg is not None:
+                guidance_by_stamp[stamp_to_ns(msg.header.stamp)] = cloud_to_table(msg, GUIDANCE_DTYPE)[0]
+    stamps = [stamp_to_ns(msg.header.stamp) if msg is not None else None for msg in decoded(topics[image_topic])]
     gt = np.stack([gt_by_stamp.get(s, np.full((4, 2), np.nan)) for s in stamps]) if gt_by_stamp else None
+    absent = np.array([(np.nan, np.nan, np.nan, -1)], dtype=GUIDANCE_DTYPE)[0]
+    guidance = np.array([guidance_by_stamp.get(s, absent) for s in stamps], dtype=GUIDANCE_DTYPE) \
+        if guidance_by_stamp else None
     count = reader.topics[topics[image_topic]].count
 
     def frames() -> Iterator[np.ndarray]:
         for _, msg, _ in reader.ros_messages([topics[image_topic]]):
             yield to_mono8_or_bgr8(msg)
     return Sequence(frames(), count, gt, path.stem, files=[*reader.files, reader.bag_path],
-                    problem=lambda: reader.problem)
+                    problem=lambda: reader.problem, stamps=stamps, guidance=guidance)
 
 
 # --------------------------------------------------------------------------- the run
@@ -220,8 +238,33 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--params-file", type=Path, default=None,
                         help="ROS 2 parameter file (default: config/docking_tracker.yaml)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--guidance", type=Path, help="with --guidance.stand-file: write frame,distance_m,lateral_m,"
+                        "speed_mps,state per frame here")
+    parser.add_argument("--fps", type=float, default=14.0,
+                        help="frame rate of a folder or video for the guidance's speed (a bag has its stamps)")
     add_config_arguments(parser, DockingConfig)
+    add_config_arguments(parser, GuidanceConfig, GUIDANCE_PREFIX)
     return parser
+
+
+def guidance_config(args, base: dict) -> GuidanceConfig:
+    """The guidance's parameters: the parameter file's ``guidance.*`` overridden by ``--guidance.*`` options."""
+    own = {k[len(GUIDANCE_PREFIX):]: v for k, v in base.items() if k.startswith(GUIDANCE_PREFIX)}
+    return config_from_arguments(GuidanceConfig, args, GUIDANCE_PREFIX, base=own)
+
+
+def guide_run(run: TrackRun, config: GuidanceConfig, stamps: list | None, fps: float) -> np.ndarray:
+    """The node's guidance over a finished run (the guidance needs only each frame's quadrilateral, state and
+    stamp, so it is the same computation as frame by frame)."""
+    from .docking.guidance import DockingGuidance, guide_track  # noqa: PLC0415
+    from .docking.stand import load_stand  # noqa: PLC0415
+    from .docking.tracker import LOST, TRACKING  # noqa: PLC0415
+
+    n = len(run.quads)
+    if stamps is None or any(s is None for s in stamps[:n]):
+        stamps = [round(i * 1e9 / fps) for i in range(n)]
+    guidance = DockingGuidance(load_stand(config.stand_file), config)
+    return guide_track(guidance, run.quads, run.states == TRACKING, run.states == LOST, stamps[:n])
 
 
 def main(argv=None) -> int:
@@ -229,8 +272,16 @@ def main(argv=None) -> int:
     try:
         base = tool_parameters(args.params_file, "docking_tracker.yaml", NODE_NAME)
         config = config_from_arguments(DockingConfig, args, base=base)
+        guided = guidance_config(args, base)
+        if args.guidance and not guided.stand_file:
+            raise ConfigError("--guidance needs a stand file (--guidance.stand-file)")
+        if guided.stand_file:
+            from .docking.guidance import DockingGuidance  # noqa: PLC0415
+            from .docking.stand import load_stand  # noqa: PLC0415
+
+            DockingGuidance(load_stand(guided.stand_file), guided)      # a broken stand file fails before the run
         seq = open_sequence(args.input)
-        check_outputs([args.out, args.quads], seq.files, "sot_track")
+        check_outputs([args.out, args.quads, args.guidance], seq.files, "sot_track")
         if seq.problem():
             print(f"sot_track: warning: {seq.problem()}", file=sys.stderr)
         if args.init:
@@ -251,6 +302,20 @@ def main(argv=None) -> int:
         return 2
     write_results(run, args.out, args.quads)
     n = len(run.quads)
+    guidance_line = ""
+    if guided.stand_file:
+        rows = guide_run(run, guided, seq.stamps, args.fps)
+        if args.guidance:
+            np.savetxt(args.guidance, np.c_[np.arange(n), rows["distance_m"], rows["lateral_m"], rows["speed_mps"],
+                                            rows["state"]], fmt=["%d", "%.3f", "%.3f", "%.3f", "%d"], delimiter=",",
+                       header="frame,distance_m,lateral_m,speed_mps,state", comments="")
+        if seq.guidance is not None:
+            from .evaluation.guidance_metrics import guidance_errors  # noqa: PLC0415
+
+            e = guidance_errors(rows, seq.guidance[:n])
+            guidance_line = (f"; guidance within the last 15 m: lateral p95 {e['lateral_near_p95']:.2f} m, "
+                             f"distance p95 {e['distance_near_p95']:.2f} m; STOP first shown "
+                             + (f"{e['stop_at_m']:.2f} m before the mark" if not e["stop_missed"] else "never"))
     if run.stopped:
         print(f"sot_track: error: stopped early, {run.stopped}; the {n} frames before it are "
               f"{'written' if args.out or args.quads else 'scored'}", file=sys.stderr)
@@ -261,7 +326,7 @@ def main(argv=None) -> int:
     if seq.gt is not None:
         scores = score_run(run, seq.gt[:n])
         line += f", success AUC {scores['success_auc']:.3f}, precision@20 {scores['precision']:.3f}"
-    print(line)
+    print(line + guidance_line)
     return 1 if run.stopped else 0
 
 

@@ -31,7 +31,7 @@ CAMERAS = {
     # held out from its cascade
     "stand": ("docking", 3, {"frames": 210, "fps": 14.0, "width": 640, "height": 480},
               ["detector_node", "docking_tracker_node"], "stand_camera.yaml",
-              ["image", "ground_truth/polygon", "ground_truth/nose", "ground_truth/stand"], 1.0),
+              ["image", "ground_truth/polygon", "ground_truth/nose", "ground_truth/stand", "ground_truth/guidance"], 1.0),
     # the UAV camera flies at the height its set-up is made for (UAV_SETUP_GROUND_RESOLUTION: 3x lower
     # than the scene's default, vehicles >= 33 px; config/uav_camera.yaml). Played at 0.5x (5 frames/s);
     # the detector (about 5.6 frames/s alone, bench/uav_detector.py) does not always keep up beside the
@@ -77,9 +77,11 @@ def run_live(bags: dict[str, Path], out: Path, rate: float) -> Path:
             f.unlink()
         recording.rmdir()
     config_dir = package_config_dir()
-    operator_box = {"initial_box": first_box(bags["stand"])}
+    # the operator's start box, and the stand's calibration (config/stands/demo_stand.yaml: this scene's stand,
+    # written by make_scenario --stand-file) for the docking guidance
+    stand_setup = {"initial_box": first_box(bags["stand"]), "guidance.stand_file": "demo_stand.yaml"}
     nodes = [NodeProcess(exe, namespace=ns, params_file=config_dir / setup, log_path=logs / f"{ns}_{exe}.log",
-                         parameters=operator_box if exe == "docking_tracker_node" else {})
+                         parameters=stand_setup if exe == "docking_tracker_node" else {})
              for ns, (_, _, _, exes, setup, _, _) in CAMERAS.items() for exe in exes]
     recorder = NodeProcess("mcap_record", args=["-a", "-o", recording, "--exclude", "^/(rosout|parameter_events)$"],
                            log_path=logs / "mcap_record.log")
@@ -187,6 +189,13 @@ def print_summary(results: dict, out: Path) -> None:
     print("\n=== demo summary ===")
     print(f"stand camera (/stand, docking tracker): {sot.get('scored_frames', '?')} frames, "
           f"success AUC {sot.get('success_auc', float('nan')):.3f}, precision@20px {sot.get('precision', float('nan')):.3f}")
+    guidance = stand.get("guidance", {})
+    if guidance:
+        stop = (f"STOP first shown {guidance['stop_at_m']:.2f} m before the mark" if not guidance["stop_missed"]
+                else "STOP never shown")
+        print(f"  docking guidance: within the last 15 m lateral error p95 {guidance['lateral_near_p95']:.2f} m, "
+              f"distance error p95 {guidance['distance_near_p95']:.2f} m; {stop}; states right on "
+              f"{100 * guidance['state_accuracy']:.0f} % of frames")
     print(f"UAV camera (/uav, detector + association): MOTA {mot.get('mota', float('nan')):.3f}, "
           f"IDF1 {mot.get('idf1', float('nan')):.3f}, ID switches {mot.get('num_switches', '?')}, "
           f"detection rate {det.get('detection_rate', float('nan')):.3f}, false alarms {det.get('false_alarm_rate', float('nan')):.3f}")
