@@ -858,3 +858,26 @@ def test_in_rain_the_colour_foreground_gives_a_too_narrow_track_back_its_wings()
                                growth=4.0, turn_deg=20.0, difficulty=1)
     n_clear, width_clear = _late_width(clear, 300, True)
     assert n_clear >= 15 and 0.9 < width_clear < 1.15
+
+
+@pytest.mark.parametrize("window", [0, 15])
+def test_a_slow_target_is_moving_only_with_the_keyframe_window(window):
+    """A textured target drifting 0.12 px a frame (a slow approach 50 m out) never moves half a pixel between
+    two frames: without the window it is judged still on every frame; with it, moving once 4 frames have passed
+    (against the keyframe), and a target that then stops is still again within the window."""
+    rng = np.random.default_rng(11)
+    empty, patch = stand(rng), textured_target(rng)
+    centre, state = np.array([150.0, 120.0]), ag.from_box(120, 105, 60, 30)
+    model = StaticBackground(max_width=320, motion=True, still_window=window)
+    model.start(paste(empty, patch, centre), state)
+    still = []
+    for k in range(1, 61):
+        position = centre + (min(k, 24) * 0.12, 0.0)          # drifts for 24 frames, then stands
+        model.observe(paste(empty, patch, position) + rng.normal(0, 0.5, SIZE), state)
+        still.append(model.target_still)
+    moving_part, standing_part = still[8:24], still[24 + window + 1:]
+    assert len(standing_part) >= 20
+    if window == 0:
+        assert all(still[6:])
+    else:
+        assert not any(moving_part) and all(standing_part)

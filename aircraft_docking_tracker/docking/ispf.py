@@ -294,6 +294,10 @@ class FilterConfig(AppearanceConfig):
     motion_pull: str = param("translation", "static camera: what of the measured motion pulls X̂: similarity "
                              "(centre, scale and rotation) or translation (the centre only; scale and shape are "
                              "left to the appearance and the extent)", choices=("similarity", "translation"))
+    motion_window: int = param(0, "static camera: a target whose corners moved less than half a level pixel between "
+                               "two frames is still only if they did not move against a keyframe 4 to this many "
+                               "frames back either (a slow approach moves them a tenth of a pixel a frame; "
+                               "static_background._slow_motion); 0: between two frames only", low=0, high=1000)
     extent_still: str = param("skip", "static camera: the extent correction on a frame where the target is "
                               "still (no corner under X̂ moved, while the motion is measured): measure (as on any frame) "
                               "or skip (the running background absorbs a standing aircraft: its silhouette shrinks, "
@@ -472,7 +476,7 @@ class AffineParticleFilter:
                                                        and config.start_axis == "mask" else 0),
                                            row_offset=config.background_rows, freeze=config.background_freeze,
                                            relight=config.background_relight, persist=config.foreground_frames,
-                                           colour=config.foreground_colour)
+                                           colour=config.foreground_colour, still_window=config.motion_window)
         self._frames = 0                 # frames stepped since the start
         self._start_box: np.ndarray | None = None     # start_refit: the axis-aligned start state, else None
         # restart_extent_low/high: a restart on a box of unknown size, the silhouette's wider plausible bounds until

@@ -207,8 +207,13 @@ class StaticBackground:
                  flicker_gain: float = 0.0, flicker_step: float = 1.0, motion: bool = False,
                  motion_max_shift: float = 0.15, max_stale: float = 1.35, stale_window: int = 25,
                  keep_first: int = 0, row_offset: bool = False, row_min: int = 16, row_max: float = 2.0,
-                 freeze: float = 0.0, relight: bool = False, persist: int = 1, colour: bool = False):
+                 freeze: float = 0.0, relight: bool = False, persist: int = 1, colour: bool = False,
+                 still_window: int = 0, still_gap: int = 4):
         self.keep_first = keep_first
+        self.still_window, self.still_gap = still_window, still_gap
+        self._key: np.ndarray | None = None    # still_window: the frame the slow motion is measured against
+        self._key_age = 0                      # ... frames since it
+        self._moved = False                    # ... whether the target moved against it (or between two frames)
         self.colour = colour
         self.colour_background: np.ndarray | None = None  # colour: B of the BGR frames (H x W x 3), else None
         self._colour_image: np.ndarray | None = None      # colour: this frame at the level, BGR
@@ -261,6 +266,7 @@ class StaticBackground:
     def _drop_track(self, image: np.ndarray) -> None:
         """Forget what belongs to a track (its foreground and motion; the ``keep_first`` frames start at ``image``)."""
         self.foreground, self.trusted, self.motion = None, False, None
+        self._key, self._key_age, self._moved = None, 0, False
         self._recent = []
         self.first = [image] if self.keep_first > 0 else []
 
@@ -289,8 +295,30 @@ class StaticBackground:
 
     @property
     def target_still(self) -> bool:
-        """The motion is measured on this frame and no corner under the estimate moved (``motion`` None)."""
-        return self.measure_motion and self.motion is None
+        """The motion is measured on this frame and no corner under the estimate moved (``motion`` None): between
+        two frames, and with ``still_window`` also not against the keyframe (:meth:`_slow_motion`)."""
+        return self.measure_motion and self.motion is None and not self._moved
+
+    def _slow_motion(self, image: np.ndarray, state: np.ndarray) -> None:
+        """``still_window`` > 0: a target whose corners moved less than ``target_motion``'s ``min_move`` between two
+        frames may still be moving, slowly: an aircraft 50 m out closing at 3 m/s moves its corners about a tenth
+        of a level pixel a frame at 14 Hz, and every frame of such an approach was judged still (the extent never
+        measured: 600-frame tuning approaches, the template's height 14-36 % short at the stop). So the motion is
+        also measured against a keyframe, ``still_gap`` to ``still_window`` frames back: the target moved when that
+        motion is measured (the keyframe then moves to this frame), and is still once ``still_window`` frames have
+        passed without it (the keyframe moves on too). A motion between two frames moves the keyframe here."""
+        if self.still_window <= 0:
+            return
+        if self.motion is not None or self._key is None:
+            self._key, self._key_age, self._moved = image, 0, self.motion is not None
+            return
+        self._key_age += 1
+        if self._key_age < self.still_gap:
+            return
+        if target_motion(self._key, image, state, self.scale) is not None:
+            self._key, self._key_age, self._moved = image, 0, True
+        elif self._key_age >= self.still_window:
+            self._key, self._key_age, self._moved = image, 0, False
 
     def observe(self, frame: np.ndarray, state: np.ndarray, colour: np.ndarray | None = None) -> np.ndarray | None:
         """F of ``frame`` given the target near ``state`` (None if untrusted); then B moves toward it.
@@ -316,6 +344,9 @@ class StaticBackground:
         self.still_run = self.still_run + 1 if shift <= self.motion_max_shift else 0
         if self.measure_motion and shift <= self.max_shift and self.still_run > self.still_frames:
             self.motion = target_motion(self._previous, image, state, self.scale)
+            self._slow_motion(image, state)
+        else:
+            self._key, self._key_age, self._moved = None, 0, False
         still_camera = shift <= self.max_shift and not self.camera_moving   # this frame measures a foreground
         if still_camera and self.colour_background is not None:    # the foreground from the channels, each lit
             lit_colour, signed = self._colour_difference(signed, outside)
