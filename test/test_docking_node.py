@@ -232,3 +232,31 @@ def test_guidance_outputs_with_a_stand_file(tmp_path):
     (tmp_path / "broken.yaml").write_text("camera: {image_size: [320, 240], points: []}\n")
     with pytest.raises(ConfigError, match="at least 4 apron marks"):
         DockingProcessor(DockingConfig(), DockingNodeConfig(), GuidanceConfig(stand_file=str(tmp_path / "broken.yaml")))
+
+
+def test_a_broken_stand_file_is_refused_at_start_and_the_node_tracks_without_guidance(tmp_path):
+    """guidance.stand_file is start-up only (read-only): a file that does not load is refused as any bad value is
+    (logged, listed, its default kept), the node runs without the guidance topics; a good one publishes them."""
+    from aircraft_docking_tracker.docking.stand import stand_file_text
+    from aircraft_docking_tracker.scenarios.docking import DockingScene
+
+    (tmp_path / "broken.yaml").write_text("camera: {image_size: [320, 240], points: []}\n")
+    good = tmp_path / "good.yaml"
+    good.write_text(stand_file_text(DockingScene(seed=1).stand_calibration()))
+    with ros_context() as (ctx, _):
+        node = DockingTrackerNode(context=ctx, parameter_overrides=[
+            Parameter("guidance.stand_file", value=str(tmp_path / "broken.yaml"))])
+        try:
+            assert "at least 4 apron marks" in node.config_errors["guidance.stand_file"]
+            assert node.get_parameter("guidance.stand_file").value == ""
+            assert "docking/guidance" not in node.processor.outputs
+            assert any(kv.key == "parameter refused: guidance.stand_file" for kv in node.diagnostic_status().values)
+        finally:
+            node.destroy_node()
+        node = DockingTrackerNode(context=ctx, parameter_overrides=[Parameter("guidance.stand_file", value=str(good))])
+        try:
+            assert not node.config_errors and "docking/guidance" in node.processor.outputs
+            refused = node.set_parameters([Parameter("guidance.stand_file", value="")])[0]
+            assert refused.successful is False                                 # start-up only
+        finally:
+            node.destroy_node()

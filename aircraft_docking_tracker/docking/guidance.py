@@ -38,8 +38,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..config import param
-from .stand import AircraftType, StandCalibration
+from ..config import ConfigError, param
+from .stand import AircraftType, StandCalibration, load_stand
 
 NO_AIRCRAFT, TRACKING, SLOW_DOWN, STOP, OVERSHOOT, LOST = range(6)
 GUIDANCE_STATES = {NO_AIRCRAFT: "no aircraft", TRACKING: "tracking", SLOW_DOWN: "slow down", STOP: "STOP",
@@ -62,8 +62,8 @@ class GuidanceConfig:
                                low=0.01, high=1000.0)
     size_sigma: float = param(0.01, "the tracked template's relative size error [1 sigma] (apparent-size range's "
                               "weight)", low=1e-4, high=1.0)
-    accel_sigma: float = param(2.0, "white-noise acceleration of the smoothing filter [m/s^2] (an aircraft brakes at up "
-                               "to about 2; less lags into a false overshoot at the stop)", low=1e-3, high=100.0)
+    accel_sigma: float = param(2.0, "white-noise acceleration of the smoothing filter [m/s^2] (an aircraft brakes at "
+                               "up to about 2; less lags into a false overshoot at the stop)", low=1e-3, high=100.0)
     max_gap_s: float = param(1.0, "a gap between frames longer than this [s] (or a stamp going back) restarts "
                              "the smoothing", low=0.0, high=3600.0)
     slow_down_m: float = param(15.0, "slow down shown within this distance of the stop mark [m]", low=0.0,
@@ -73,6 +73,16 @@ class GuidanceConfig:
                                   low=0.0, high=100.0)
     overshoot_m: float = param(0.5, "overshoot shown when the nose is more than this past the mark [m]", low=0.0,
                                high=100.0)
+
+    def validate(self) -> None:
+        """A stand file that exists and passes every check, holding ``aircraft_type`` (the one validation every
+        parameter goes through: a bad file is refused like any bad value, with the key at fault)."""
+        if self.stand_file:
+            stand = load_stand(self.stand_file)
+            if self.aircraft_type:
+                stand.aircraft_type(self.aircraft_type)
+        elif self.aircraft_type:
+            raise ConfigError("aircraft_type is set but there is no stand_file to hold it", ("aircraft_type",))
 
 
 @dataclass

@@ -226,7 +226,7 @@ def load_stand(path: str | Path) -> StandCalibration:
     try:
         return parse_stand(data, path.stem)
     except ConfigError as exc:
-        raise ConfigError(f"stand file {path}: {exc}", exc.fields) from None
+        raise ConfigError(f"stand file {path}: {exc}", ("stand_file",)) from None
 
 
 STAND_FILE_HEADER = """\

@@ -143,6 +143,7 @@ class PerceptionNode(Node):
         """
         defaults = cls()
         fields = {f.name: f for f in dataclasses.fields(cls)}
+        refused = self._refused_by_cross_field_rules(cls, prefix, fields, defaults)
         values = {}
         for name, f in fields.items():
             full = prefix + name
@@ -150,6 +151,11 @@ class PerceptionNode(Node):
             descriptor = _descriptor(f, default)
             override = self._parameter_overrides.get(full)
             problem = None
+            if name in refused:    # a cross-field rule refused it before declaring: a read-only parameter
+                # cannot be undeclared to take its default afterwards, as the loop below does
+                param = self.declare_parameter(full, _ros_default(default), descriptor, ignore_override=True)
+                values[name] = _from_ros(param.value, default)
+                continue
             if override is not None:
                 coerced = _coerce_override(override.value, default)
                 try:   # checked before declaring: a refused value never becomes the parameter's value
@@ -190,6 +196,39 @@ class PerceptionNode(Node):
             cfg = defaults
         self._configs[prefix] = (cls, cfg)
         return cfg
+
+    def _refused_by_cross_field_rules(self, cls: type, prefix: str, fields: dict, defaults) -> set[str]:
+        """The fields whose start-up override a cross-field rule of ``cls`` refuses (a stand file that does not load,
+        ``min_size > max_size``), found before any is declared; each is logged and listed as in
+        :meth:`declare_config`. Overrides that fail their own field's check are left to the per-field step."""
+        candidates = {}
+        for name, f in fields.items():
+            override = self._parameter_overrides.get(prefix + name)
+            if override is None:
+                continue
+            default = getattr(defaults, name)
+            try:
+                value = _from_ros(_coerce_override(override.value, default), default)
+                config_module.check_field(f, value, default)
+            except (config_module.ConfigError, TypeError, ValueError):
+                continue
+            candidates[name] = value
+        values = {name: getattr(defaults, name) for name in fields} | candidates
+        refused: set[str] = set()
+        for _ in range(len(fields) + 1):
+            try:
+                config_module.from_mapping(cls, values)
+                break
+            except config_module.ConfigError as exc:
+                named = [n for n in exc.fields if n in candidates and n not in refused]
+                if not named:
+                    break
+                for n in named:
+                    self._refuse_at_start(prefix + n, f"{prefix + n}={values[n]!r} refused: {exc}; keeping the "
+                                          f"default {getattr(defaults, n)!r}")
+                    values[n] = getattr(defaults, n)
+                    refused.add(n)
+        return refused
 
     def _refuse_at_start(self, name: str, reason: str) -> None:
         self.config_errors[name] = reason
