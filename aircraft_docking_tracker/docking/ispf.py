@@ -294,10 +294,11 @@ class FilterConfig(AppearanceConfig):
     motion_pull: str = param("translation", "static camera: what of the measured motion pulls X̂: similarity "
                              "(centre, scale and rotation) or translation (the centre only; scale and shape are "
                              "left to the appearance and the extent)", choices=("similarity", "translation"))
-    motion_window: int = param(0, "static camera: a target whose corners moved less than half a level pixel between "
+    motion_window: int = param(15, "static camera: a target whose corners moved less than half a level pixel between "
                                "two frames is still only if they did not move against a keyframe 4 to this many "
                                "frames back either (a slow approach moves them a tenth of a pixel a frame; "
-                               "static_background._slow_motion); 0: between two frames only", low=0, high=1000)
+                               "static_background._slow_motion; 15: about 1 s at the stand's 14 Hz, scale it with the "
+                               "frame rate); 0: between two frames only (until session 26)", low=0, high=1000)
     extent_still: str = param("skip", "static camera: the extent correction on a frame where the target is "
                               "still (no corner under X̂ moved, while the motion is measured): measure (as on any frame) "
                               "or skip (the running background absorbs a standing aircraft: its silhouette shrinks, "
