@@ -863,8 +863,9 @@ def test_in_rain_the_colour_foreground_gives_a_too_narrow_track_back_its_wings()
 @pytest.mark.parametrize("window", [0, 15])
 def test_a_slow_target_is_moving_only_with_the_keyframe_window(window):
     """A textured target drifting 0.12 px a frame (a slow approach 50 m out) never moves half a pixel between
-    two frames: without the window it is judged still on every frame; with it, moving once 4 frames have passed
-    (against the keyframe), and a target that then stops is still again within the window."""
+    two frames: without the window it is judged still on every frame; with it, moving on most frames once the
+    drift against the keyframe passes half a pixel (the check that finds 0.48 px calls that frame still), and
+    still again at most ``still_gap`` (4) frames after it stops, not a whole window later."""
     rng = np.random.default_rng(11)
     empty, patch = stand(rng), textured_target(rng)
     centre, state = np.array([150.0, 120.0]), ag.from_box(120, 105, 60, 30)
@@ -875,9 +876,8 @@ def test_a_slow_target_is_moving_only_with_the_keyframe_window(window):
         position = centre + (min(k, 24) * 0.12, 0.0)          # drifts for 24 frames, then stands
         model.observe(paste(empty, patch, position) + rng.normal(0, 0.5, SIZE), state)
         still.append(model.target_still)
-    moving_part, standing_part = still[8:24], still[24 + window + 1:]
-    assert len(standing_part) >= 20
+    moving_part, standing_part = still[8:24], still[24 + 5:]
     if window == 0:
         assert all(still[6:])
     else:
-        assert not any(moving_part) and all(standing_part)
+        assert np.mean(moving_part) <= 0.3 and all(standing_part)
