@@ -250,7 +250,7 @@ def run_ours(seq: dict, overrides: dict, seed: int = 0, start: str = "box") -> d
     init = seq["gt_quads"][0] if start == "polygon" else seq["gt_boxes"][0] if start == "box" else None
     run = track(frames, init, config, len(seq["files"]), progress=False, detections=tables)
     out = {"boxes": run.boxes, "quads": run.quads, "times": run.step_seconds, "particles": run.particles,
-           "scores": run.scores}
+           "scores": run.scores, "states": run.states}
     if start == "detector":
         waiting = np.isnan(run.quads).any(axis=(1, 2))
         out["started_at"] = int(np.argmin(waiting)) if not waiting.all() else None

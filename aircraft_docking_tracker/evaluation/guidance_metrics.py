@@ -18,7 +18,9 @@ def _spread(name: str, errors: np.ndarray) -> dict:
     errors = np.nan_to_num(np.abs(errors), nan=np.inf)
     if not len(errors):
         return {f"{name}_median": float("nan"), f"{name}_p95": float("nan")}
-    return {f"{name}_median": float(np.median(errors)), f"{name}_p95": float(np.percentile(errors, 95))}
+    # frames without a figure are infinite errors: interpolating between two of them would give NaN
+    p95 = np.percentile(errors, 95) if np.isfinite(errors).all() else np.percentile(errors, 95, method="higher")
+    return {f"{name}_median": float(np.median(errors)), f"{name}_p95": float(p95)}
 
 
 def guidance_errors(estimate: np.ndarray, truth: np.ndarray, near_m: float = NEAR_M) -> dict:

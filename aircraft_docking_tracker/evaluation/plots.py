@@ -78,6 +78,7 @@ def guidance_error_plot(runs: dict, path: str | Path, title: str = "", last_m: f
         axes[0].plot(d[keep], np.asarray(g["distance_error_m"], float)[keep], lw=width, label=name)
         axes[1].plot(d[keep], np.asarray(g["lateral_error_m"], float)[keep], lw=width, label=name)
     for ax, label, band in ((axes[0], "distance error [m]", 0.5), (axes[1], "lateral error [m]", 0.25)):
+        ax.set_yscale("symlog", linthresh=1.0)      # linear within 1 m, where the targets are; a lost track still fits
         ax.axhspan(-band, band, color="g", alpha=0.12)
         ax.axvline(15.0, color="k", lw=0.5, ls="--")
         ax.set_xlabel("true distance to go [m]")
