@@ -255,15 +255,12 @@ class DockingProcessor(MessageProcessor):
 
         header = Header(stamp=Time(sec=image_header.stamp.sec, nanosec=image_header.stamp.nanosec),
                         frame_id=self.node.guidance_frame)
-        stand, aircraft = self.guidance.stand, self.guidance.aircraft
+        lead_in, stop = self.guidance.stand.lead_in, self.guidance.stop_bar
         rgb = tuple(c / 255.0 for c in PANEL_COLORS[guidance.state][::-1])
         markers = MarkerArray()
         markers.markers.append(delete_all(header, "guidance"))
-        markers.markers.append(line_strip_marker(header, "guidance", 0, np.c_[stand.lead_in, np.zeros(len(stand.lead_in))],
+        markers.markers.append(line_strip_marker(header, "guidance", 0, np.c_[lead_in, np.zeros(len(lead_in))],
                                                  (1.0, 0.85, 0.0), 0.15))
-        across = np.array([stand.lead_in[-1][1] - stand.lead_in[-2][1], stand.lead_in[-2][0] - stand.lead_in[-1][0]])
-        across = 3.0 * across / np.linalg.norm(across)
-        stop = np.array([aircraft.stop_m - across, aircraft.stop_m + across])
         markers.markers.append(line_strip_marker(header, "guidance", 1, np.c_[stop, np.zeros(2)], (1.0, 0.1, 0.1), 0.3))
         if np.isfinite(guidance.nose_stand).all():
             nose = guidance.nose_stand

@@ -126,7 +126,7 @@ def _video_sequence(path: Path) -> Sequence:
 
 
 def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "ground_truth/polygon") -> Sequence:
-    from .io.bag import BagError, BagReader, stamp_to_ns  # noqa: PLC0415
+    from .io.bag import BagError, BagReader, header_stamp_ns, stamp_to_ns  # noqa: PLC0415
     from .images import to_mono8_or_bgr8  # noqa: PLC0415
     from .docking.guidance import GUIDANCE_DTYPE  # noqa: PLC0415
     from .object_table import cloud_to_table  # noqa: PLC0415
@@ -153,7 +153,12 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
         for msg in decoded(topics[GT_GUIDANCE]):
             if msg is not None:
                 guidance_by_stamp[stamp_to_ns(msg.header.stamp)] = cloud_to_table(msg, GUIDANCE_DTYPE)[0]
-    stamps = [stamp_to_ns(msg.header.stamp) if msg is not None else None for msg in decoded(topics[image_topic])]
+    stamps = []                      # the images' header stamps, read without decoding the pixels
+    for item in reader.messages([topics[image_topic]]):
+        try:
+            stamps.append(header_stamp_ns(item.data))
+        except BagError:
+            stamps.append(None)
     gt = np.stack([gt_by_stamp.get(s, np.full((4, 2), np.nan)) for s in stamps]) if gt_by_stamp else None
     absent = np.array([(np.nan, np.nan, np.nan, -1)], dtype=GUIDANCE_DTYPE)[0]
     guidance = np.array([guidance_by_stamp.get(s, absent) for s in stamps], dtype=GUIDANCE_DTYPE) \
@@ -272,14 +277,9 @@ def main(argv=None) -> int:
     try:
         base = tool_parameters(args.params_file, "docking_tracker.yaml", NODE_NAME)
         config = config_from_arguments(DockingConfig, args, base=base)
-        guided = guidance_config(args, base)
+        guided = guidance_config(args, base)      # validated: a stand file that does not load fails before the run
         if args.guidance and not guided.stand_file:
             raise ConfigError("--guidance needs a stand file (--guidance.stand-file)")
-        if guided.stand_file:
-            from .docking.guidance import DockingGuidance  # noqa: PLC0415
-            from .docking.stand import load_stand  # noqa: PLC0415
-
-            DockingGuidance(load_stand(guided.stand_file), guided)      # a broken stand file fails before the run
         seq = open_sequence(args.input)
         check_outputs([args.out, args.quads, args.guidance], seq.files, "sot_track")
         if seq.problem():

@@ -101,10 +101,9 @@ def track_approach(job: tuple) -> dict:
 def guide(approach: dict, run: int, config) -> dict:
     """The guidance over one tracked run: a ``GUIDANCE_DTYPE`` row per frame, and its mean time per frame."""
     from aircraft_docking_tracker.docking.guidance import DockingGuidance, guide_track  # noqa: PLC0415
-    from aircraft_docking_tracker.docking.stand import parse_stand  # noqa: PLC0415
     from aircraft_docking_tracker.docking.tracker import LOST, TRACKING  # noqa: PLC0415
 
-    guidance = DockingGuidance(parse_stand(approach["stand"]), config)
+    guidance = DockingGuidance(approach["stand"], config)
     states = approach["states"][run]
     t0 = time.perf_counter()
     rows = guide_track(guidance, approach["quads"][run], states == TRACKING, states == LOST, approach["stamps"])
@@ -126,7 +125,9 @@ def score(approach: dict, guided: dict) -> dict:
 
 
 def load(paths: list[str]) -> list[dict]:
-    """The cached tracked runs, each with its stand's calibration file (made anew: it needs no rendering)."""
+    """The cached tracked runs, each with its stand's calibration (the file made anew, as a surveyor would: it needs
+    no rendering; read once here, not per run)."""
+    from aircraft_docking_tracker.docking.stand import parse_stand  # noqa: PLC0415
     from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig  # noqa: PLC0415
 
     out = []
@@ -136,8 +137,8 @@ def load(paths: list[str]) -> list[dict]:
         a["options"] = json.loads(str(a["options"]))
         a["seed"] = int(Path(p).stem.split("_")[0].removeprefix("approach"))
         frames = len(a["stamps"])
-        a["stand"] = DockingScene(DockingSceneConfig(width=640, height=480, frames=frames, **a["options"]),
-                                  seed=a["seed"]).stand_calibration()
+        a["stand"] = parse_stand(DockingScene(DockingSceneConfig(width=640, height=480, frames=frames,
+                                                                 **a["options"]), seed=a["seed"]).stand_calibration())
         out.append(a)
     return out
 

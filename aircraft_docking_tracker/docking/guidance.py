@@ -117,9 +117,9 @@ def vertical_extent(quad: np.ndarray) -> float:
     return 0.5 * float(np.linalg.norm(quad[3] - quad[0]) + np.linalg.norm(quad[2] - quad[1]))
 
 
-def along_line(line: np.ndarray, point) -> tuple[float, float]:
-    """(arc length from the line's first point, signed offset positive to the right of the direction of
-    travel) of ``point``'s foot on the polyline; beyond either end the end segment is extended."""
+def _nearest_segment(line: np.ndarray, point) -> tuple[int, float, np.ndarray]:
+    """(segment index, arc length of ``point``'s foot from the line's first point, the foot) on the polyline;
+    beyond either end the end segment is extended."""
     p = np.asarray(point, np.float64)[:2]
     a, b = line[:-1], line[1:]
     seg = b - a
@@ -131,9 +131,29 @@ def along_line(line: np.ndarray, point) -> tuple[float, float]:
     feet = a + t_clamped[:, None] * seg
     i = int(np.argmin(np.linalg.norm(p - feet, axis=1)))
     arc = float(np.concatenate([[0.0], np.cumsum(length)])[i] + t_clamped[i] * length[i])
-    direction = seg[i] / length[i]
+    return i, arc, feet[i]
+
+
+def _direction(line: np.ndarray, segment: int) -> np.ndarray:
+    step = line[segment + 1] - line[segment]
+    return step / np.linalg.norm(step)
+
+
+def along_line(line: np.ndarray, point) -> tuple[float, float]:
+    """(arc length from the line's first point, signed offset positive to the right of the direction of
+    travel) of ``point``'s foot on the polyline; beyond either end the end segment is extended."""
+    i, arc, foot = _nearest_segment(line, point)
+    direction = _direction(line, i)
     right = np.array([direction[1], -direction[0]])
-    return arc, float((p - feet[i]) @ right)
+    return arc, float((np.asarray(point, np.float64)[:2] - foot) @ right)
+
+
+def stop_bar(line: np.ndarray, stop_m, half_length: float = 3.0) -> np.ndarray:
+    """(2, 2): a bar across the line through the stop mark's foot, ``half_length`` each side [m] (for display)."""
+    i, _, foot = _nearest_segment(line, stop_m)
+    direction = _direction(line, i)
+    across = half_length * np.array([direction[1], -direction[0]])
+    return np.array([foot - across, foot + across])
 
 
 def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, pixel_sigma: float,
@@ -207,6 +227,7 @@ class DockingGuidance:
         self.config = config or GuidanceConfig()
         self.aircraft = stand.aircraft_type(self.config.aircraft_type or next(iter(stand.aircraft)))
         self.stop_arc = along_line(stand.lead_in, self.aircraft.stop_m)[0]
+        self.stop_bar = stop_bar(stand.lead_in, self.aircraft.stop_m)
         self.filter = ConstantVelocityFilter(2, self.config.accel_sigma)
         self.last_stamp_ns: int | None = None
         self.showing_stop = False

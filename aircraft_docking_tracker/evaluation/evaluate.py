@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import struct
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +39,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from aircraft_docking_tracker.io.bag import BagReader
+from aircraft_docking_tracker.io.bag import BagReader, header_stamp_ns
 from aircraft_docking_tracker.config import add_config_arguments, config_from_arguments, param, validate
 from aircraft_docking_tracker.docking.guidance import GUIDANCE_DTYPE, template_point
 from aircraft_docking_tracker.evaluation import plots, report
@@ -91,14 +90,6 @@ class EvaluateConfig:
 
 
 # --- reading -------------------------------------------------------------------------------------
-
-def header_stamp_ns(cdr: bytes) -> int:
-    """Header stamp of a serialised message that starts with ``std_msgs/Header`` (little-endian CDR)."""
-    if len(cdr) < 12:
-        raise EvaluationError("message too short to hold a header")
-    sec, nanosec = struct.unpack_from("<iI", cdr, 4)
-    return sec * 1_000_000_000 + nanosec
-
 
 @dataclass
 class Stream:

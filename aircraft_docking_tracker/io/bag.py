@@ -60,6 +60,15 @@ def stamp_to_ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+def header_stamp_ns(cdr: bytes) -> int:
+    """Header stamp [ns] of a serialised message that starts with ``std_msgs/Header`` (little-endian CDR), read
+    without deserialising the rest (an image's pixels)."""
+    if len(cdr) < 12:
+        raise BagError("message too short to hold a header")
+    sec, nanosec = struct.unpack_from("<iI", cdr, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
 def ns_to_stamp(ns: int):
     """Integer nanoseconds to ``builtin_interfaces/Time``."""
     from builtin_interfaces.msg import Time  # noqa: PLC0415

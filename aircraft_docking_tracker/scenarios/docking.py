@@ -279,9 +279,13 @@ class DockingScene:
         affine[:2, 2] = nose_img - linear @ NOSE_TPL
         return affine, np.array([x, y]), psi
 
+    def _lead_in_samples(self) -> np.ndarray:
+        """About 60 points of the lead-in path [m], from the stop position outwards."""
+        return self.path_xy[:: max(1, len(self.path_xy) // 60)]
+
     def stand_geometry(self) -> dict:
         """Lead-in line and stop line in ground [m] and image [px] coordinates, with the camera."""
-        lead = self.path_xy[:: max(1, len(self.path_xy) // 60)]
+        lead = self._lead_in_samples()
         stop = np.array([[-6.0, 0.0], [6.0, 0.0]])
         to3 = lambda xy: np.c_[xy, np.zeros(len(xy))]        # noqa: E731 (painted on the apron)
         return {
@@ -446,7 +450,7 @@ class DockingScene:
         marks = np.array([[x, y] for y in (-20.0, -10.0, 0.0, 15.0, 30.0) for x in (-7.5, 7.5)])
         clicked = cam.project(np.c_[marks, np.zeros(len(marks))])
         clicked += np.random.default_rng([self.seed, 4]).normal(0.0, click_sigma_px, clicked.shape)
-        lead = self.path_xy[:: max(1, len(self.path_xy) // 60)][::-1]
+        lead = self._lead_in_samples()[::-1]
         lead = np.vstack([lead[:-1], [0.0, 0.0], [0.0, -10.0]])
         return {
             "stand": f"synthetic stand {self.seed}",
