@@ -17,6 +17,13 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    a fixed fraction -- so they are **fused by inverse variance** on the depth, with σ_g = |∂Z_g/∂v|
    ``pixel_sigma`` and σ_s = Z_s ``size_sigma``: far away the size decides, close to a high camera the
    ground plane does. A ray that does not meet the plane leaves the size alone.
+   b. **Near the stop, the nose wheel** (:mod:`~aircraft_docking_tracker.docking.nose_gear`): once the
+   template is ``gear_min_height_px`` tall, the aircraft's symmetry axis and the nose wheel's ground
+   contact on it are measured in the frame, and when they are found the contact replaces the nose
+   pixel: its ground-plane depth is on the apron (z = 0, the camera's whole height above it), with
+   ``gear_pixel_sigma``, fused with the size's as above, and the nose is the type's
+   ``nose_gear_setback_m`` ahead of the contact along the line. The quadrilateral's sideways and size
+   errors (tens of pixels, a few percent, late in an approach) then no longer reach the figures.
 3. **On the apron**: the fused nose point, projected on the lead-in line (a polyline, entry first):
    ``distance_m`` = arc length from the nose's foot to the stop mark's foot (positive before the
    mark, negative past it); ``lateral_m`` = signed offset from the line, **positive when the nose is
@@ -25,20 +32,32 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
 4. **Smoothing**: a constant-velocity Kalman filter over (distance, lateral) with white-noise
    acceleration ``accel_sigma`` and the fused measurement's variance; ``speed_mps`` is the closing
    speed, minus the filtered rate of the distance (positive while approaching). A time jump (a stamp
-   going back, or a gap over ``max_gap_s``) restarts the filter.
+   going back, or a gap over ``max_gap_s``) restarts the filter. **Gate**: once the filter has settled
+   (:data:`GATE_AFTER` measurements), a distance more than ``gate_sigma`` sigmas of the innovation
+   from the prediction is rejected and counted (an aircraft does not jump; a tracker that slips onto the
+   jet bridge does), and the prediction is shown; rejected for longer than ``max_gap_s``, the filter
+   restarts from the new figures. The closing rate is held within ``max_speed_mps``.
 5. **State** (as the display shows it): 0 no aircraft (the tracker waits), 1 tracking, 2 slow down
    (within ``slow_down_m`` of the mark), 3 STOP (within ``stop_m`` of the mark, or past it by less than
    ``overshoot_m``; once shown it holds until the aircraft is ``stop_release_m`` beyond ``stop_m``
    again), 4 overshoot (more than ``overshoot_m`` past the mark), 5 lost (the tracker lost the aircraft:
-   no figure is shown, and the filter starts afresh on the next track).
+   no figure is shown, and the filter starts afresh on the next track). STOP and overshoot need an
+   approach: since the filter (re)started it must have followed the nose ``approach_m`` towards the
+   mark, else slow down is shown in their place -- a track that starts on, or restarts onto, something
+   standing near the mark (a vehicle, the jet bridge) shows no STOP; slow down must have been shown for
+   ``slow_down_min_s`` first, continuously (a tracker that slips between the aircraft and the clutter makes
+   the figure jump across the zone in a frame); and STOP and overshoot come on only on a frame whose
+   measurement was taken, never while the gate holds the prediction.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import cv2
 import numpy as np
 
 from ..config import ConfigError, param
+from .nose_gear import NOSE_GEAR_DTYPE, measure_nose_gear
 from .stand import AircraftType, StandCalibration, load_stand
 
 NO_AIRCRAFT, TRACKING, SLOW_DOWN, STOP, OVERSHOOT, LOST = range(6)
@@ -60,10 +79,12 @@ class GuidanceConfig:
                                "the file's first (start-up only)", read_only=True)
     pixel_sigma: float = param(3.0, "the tracked nose's position error [px, 1 sigma] (ground-plane range's weight)",
                                low=0.01, high=1000.0)
-    size_sigma: float = param(0.01, "the tracked template's relative size error [1 sigma] (apparent-size range's "
-                              "weight)", low=1e-4, high=1.0)
-    accel_sigma: float = param(2.0, "white-noise acceleration of the smoothing filter [m/s^2] (an aircraft brakes at "
-                               "up to about 2; less lags into a false overshoot at the stop)", low=1e-3, high=100.0)
+    size_sigma: float = param(0.1, "the tracked template's relative size error [1 sigma] (apparent-size range's "
+                              "weight; tracked quadrilaterals are a few percent off late in an approach, tens in the "
+                              "worst runs)", low=1e-4, high=1.0)
+    accel_sigma: float = param(8.0, "white-noise acceleration of the smoothing filter [m/s^2] (how closely it follows "
+                               "the figures: the nose wheel's are good to a pixel, and a filter that lags shows STOP "
+                               "late or a false overshoot)", low=1e-3, high=100.0)
     max_gap_s: float = param(1.0, "a gap between frames longer than this [s] (or a stamp going back) restarts "
                              "the smoothing", low=0.0, high=3600.0)
     slow_down_m: float = param(15.0, "slow down shown within this distance of the stop mark [m]", low=0.0,
@@ -73,6 +94,33 @@ class GuidanceConfig:
                                   low=0.0, high=100.0)
     overshoot_m: float = param(0.5, "overshoot shown when the nose is more than this past the mark [m]", low=0.0,
                                high=100.0)
+    gate_sigma: float = param(8.0, "a measured distance further than this many sigmas from the smoothing's "
+                              "prediction is rejected and counted (an aircraft does not jump); 0: no gate",
+                              low=0.0, high=1000.0)
+    max_speed_mps: float = param(12.0, "the smoothing's closing speed is held within this [m/s] (an aircraft taxies "
+                                 "in at a few; a two-point start on noisy figures can give a rate of tens)", low=0.1,
+                                 high=1000.0)
+    approach_m: float = param(3.0, "STOP and overshoot are shown only once the smoothing has followed the nose "
+                              "this far towards the mark since it (re)started [m] (a lock on something standing, "
+                              "or a figure that jumps, shows slow down instead)", low=0.0, high=1000.0)
+    slow_down_min_s: float = param(1.5, "STOP and overshoot are shown only after slow down was shown this long, "
+                                   "continuously, since the smoothing (re)started [s] (an aircraft covers the last "
+                                   "slow_down_m in several seconds; a figure that jumps to the mark does not)",
+                                   low=0.0, high=60.0)
+    gear_pixel_sigma: float = param(0.25, "the nose wheel's measured ground contact's error [px, 1 sigma] (its "
+                                    "range's weight)", low=0.01, high=1000.0)
+    gear_min_height_px: float = param(80.0, "measure the nose wheel's ground contact once the tracked template "
+                                      "is at least this tall [px]; 0: never (the quadrilateral alone)", low=0.0,
+                                      high=10000.0)
+    gear_search: float = param(0.5, "the aircraft's symmetry axis is searched this far either side of the "
+                               "tracked nose [template heights]", low=0.01, high=1.0)
+    gear_window: float = param(0.12, "the symmetry window's half-width, and the ground contact's search either "
+                               "side of where the template puts it [template heights]", low=0.01, high=0.5)
+    gear_band: float = param(0.02, "the ground contact's grey profile is averaged this far either side of the "
+                             "axis [template heights]", low=0.0, high=0.2)
+    gear_min_symmetry: float = param(0.5, "the mirror correlation a symmetry axis needs", low=-1.0, high=1.0)
+    gear_min_contrast: float = param(12.0, "the step from tyre to apron a ground contact needs [grey levels]",
+                                     low=0.0, high=255.0)
 
     def validate(self) -> None:
         """A stand file that exists and passes every check, holding ``aircraft_type`` (the one validation every
@@ -97,6 +145,8 @@ class GuidanceResult:
     nose_stand: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))   # fused, unsmoothed [m]
     depth_ground_m: float = float("nan")          # optical-axis depth of the nose from the ground plane
     depth_size_m: float = float("nan")            # ... and from the apparent size
+    gear_measured: bool = False                   # the nose wheel's ground contact was measured
+    measurement_taken: bool = True                # False: the gate rejected this frame's measurement
 
     def row(self) -> np.ndarray:
         """This frame as a one-row :data:`GUIDANCE_DTYPE` table."""
@@ -156,30 +206,55 @@ def stop_bar(line: np.ndarray, stop_m, half_length: float = 3.0) -> np.ndarray:
     return np.array([foot - across, foot + across])
 
 
+def fuse_depths(depths, sigmas) -> tuple[float, float]:
+    """Inverse-variance fusion of depth estimates (NaN ones left out): (depth, its sigma); NaN if none."""
+    depths, sigmas = np.asarray(depths, np.float64), np.asarray(sigmas, np.float64)
+    ok = np.isfinite(depths) & np.isfinite(sigmas) & (sigmas > 0)
+    if not ok.any():
+        return float("nan"), float("nan")
+    weights = 1.0 / sigmas[ok] ** 2
+    return float(np.dot(weights, depths[ok]) / weights.sum()), float(1.0 / np.sqrt(weights.sum()))
+
+
 def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, pixel_sigma: float,
-                size_sigma: float) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+                size_sigma: float, gear: np.ndarray | None = None,
+                gear_pixel_sigma: float = 0.7) -> tuple[np.ndarray, np.ndarray, float, float, float]:
     """(nose pixel, fused nose point on the stand [m], depth from the ground plane, depth from the size,
-    fused depth's sigma [m]) of one tracked quadrilateral (steps 1-2 of the module docstring)."""
+    fused depth's sigma [m]) of one tracked quadrilateral (steps 1-2 of the module docstring); with a measured
+    nose-wheel ground contact (``gear``, a :data:`~aircraft_docking_tracker.docking.nose_gear.NOSE_GEAR_DTYPE`
+    row) the ground-plane depth is the contact's on the apron, and the nose is ``nose_gear_setback_m`` ahead
+    of it along the lead-in line (step 2b)."""
     camera = stand.camera
-    nose = template_point(quad, aircraft.nose_in_template)
     extent = vertical_extent(quad)
     depth_size = camera.focal_px * aircraft.height_m / extent if extent > 0 else np.nan
+    if gear is not None and np.isfinite(gear["ground_y"]).all():
+        contact = np.array([float(gear["ground_x"][0]), float(gear["ground_y"][0])])
+        depth_ground, depth_below = camera.depth_on_plane([contact, contact + (0.0, 1.0)], 0.0)
+        # the size gives the nose's depth; the wheel stands about setback further from a camera it faces
+        depth, sigma = fuse_depths([depth_size + aircraft.nose_gear_setback_m, depth_ground],
+                                   [depth_size * size_sigma, abs(depth_ground - depth_below) * gear_pixel_sigma])
+        if not np.isfinite(depth):
+            return contact, np.full(3, np.nan), float(depth_ground), float(depth_size), sigma
+        foot = camera.point_at_depth(contact, depth)[0][:2]
+        i, _, _ = _nearest_segment(stand.lead_in, foot)
+        point = np.r_[foot + aircraft.nose_gear_setback_m * _direction(stand.lead_in, i), aircraft.nose_height_m]
+        nose = np.array([float(gear["axis_x"][0]), float(gear["axis_y"][0])])
+        return nose, point, float(depth_ground), float(depth_size), sigma
+    nose = template_point(quad, aircraft.nose_in_template)
     depth_ground, depth_below = camera.depth_on_plane([nose, nose + (0.0, 1.0)], aircraft.nose_height_m)
-    weights, depths = [], []
-    if np.isfinite(depth_size):
-        weights.append(1.0 / (depth_size * size_sigma) ** 2)
-        depths.append(depth_size)
-    if np.isfinite(depth_ground) and np.isfinite(depth_below):
-        weights.append(1.0 / ((depth_ground - depth_below) * pixel_sigma) ** 2)
-        depths.append(depth_ground)
-    if not weights:
-        return nose, np.full(3, np.nan), float(depth_ground), float(depth_size), float("nan")
-    depth = float(np.dot(weights, depths) / np.sum(weights))
-    return (nose, camera.point_at_depth(nose, depth)[0], float(depth_ground), float(depth_size),
-            float(1.0 / np.sqrt(np.sum(weights))))
+    depth, sigma = fuse_depths([depth_size, depth_ground],
+                               [depth_size * size_sigma, abs(depth_ground - depth_below) * pixel_sigma])
+    if not np.isfinite(depth):
+        return nose, np.full(3, np.nan), float(depth_ground), float(depth_size), sigma
+    return nose, camera.point_at_depth(nose, depth)[0], float(depth_ground), float(depth_size), sigma
 
 
 # --------------------------------------------------------------------------- smoothing
+#: Measurements a restarted filter takes before its gate acts: the two-point start's rate is one difference of
+#: two noisy figures, and a gate on a wrong rate would reject the right ones while the prediction runs away.
+GATE_AFTER = 10
+
+
 class ConstantVelocityFilter:
     """Independent constant-velocity Kalman filters over a few channels (state: value, rate), white-noise
     acceleration ``accel_sigma`` (filterpy's Q_discrete_white_noise, dim 2)."""
@@ -193,29 +268,38 @@ class ConstantVelocityFilter:
     def reset(self) -> None:
         self.seen = 0
 
-    def step(self, dt: float, z: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """Predict over ``dt`` [s], update with measurements ``z`` of variances ``r``; the filtered (value, rate).
-        The first measurement sets the value (rate 0), the second the rate by difference (two-point start)."""
+    def predict(self, dt: float) -> None:
+        """The state ``dt`` [s] later (constant velocity; the covariance grows by the white-noise acceleration)."""
+        F = np.array([[1.0, dt], [0.0, 1.0]])
+        q = self.accel_sigma ** 2 * np.array([[dt ** 4 / 4, dt ** 3 / 2], [dt ** 3 / 2, dt ** 2]])
+        self.x = self.x @ F.T
+        self.P = F @ self.P @ F.T + q
+
+    def step(self, dt: float, z: np.ndarray, r: np.ndarray, gate: float = 0.0) -> tuple[np.ndarray, bool]:
+        """Predict over ``dt`` [s], update with measurements ``z`` of variances ``r``; (the filtered (value, rate),
+        whether the measurement was taken). The first measurement sets the value (rate 0), the second the rate by
+        difference (two-point start). Once ``GATE_AFTER`` are taken, with ``gate`` > 0, a measurement whose first
+        channel's innovation exceeds ``gate`` of its sigma is not taken: the prediction is returned."""
         z, r = np.asarray(z, np.float64), np.asarray(r, np.float64)
-        self.seen += 1
-        if self.seen == 1 or (self.seen == 2 and dt > 0):
+        if self.seen == 0 or (self.seen == 1 and dt > 0):
+            self.seen += 1
             rate = (z - self.x[:, 0]) / dt if self.seen == 2 else np.zeros_like(z)
             self.x[:, 0], self.x[:, 1] = z, rate
             self.P[:] = 0.0
             self.P[:, 0, 0] = r
             self.P[:, 1, 1] = 2 * r / dt ** 2 if self.seen == 2 else 1e6
             self.P[:, 0, 1] = self.P[:, 1, 0] = r / dt if self.seen == 2 else 0.0
-            return self.x.copy()
-        F = np.array([[1.0, dt], [0.0, 1.0]])
-        q = self.accel_sigma ** 2 * np.array([[dt ** 4 / 4, dt ** 3 / 2], [dt ** 3 / 2, dt ** 2]])
-        self.x = self.x @ F.T
-        self.P = F @ self.P @ F.T + q
+            return self.x.copy(), True
+        self.predict(dt)
         innovation = z - self.x[:, 0]
         s = self.P[:, 0, 0] + r
+        if gate > 0 and self.seen >= GATE_AFTER and abs(innovation[0]) > gate * np.sqrt(s[0]):
+            return self.x.copy(), False
+        self.seen += 1
         gain = self.P[:, :, 0] / s[:, None]
         self.x += gain * innovation[:, None]
         self.P -= gain[:, :, None] * self.P[:, None, 0, :]
-        return self.x.copy()
+        return self.x.copy(), True
 
 
 # --------------------------------------------------------------------------- the guidance
@@ -232,32 +316,73 @@ class DockingGuidance:
         self.last_stamp_ns: int | None = None
         self.showing_stop = False
         self.restarts = 0                 # smoothing restarted by a time jump
+        self.rejected = 0                 # measurements the gate rejected
+        self.gear_measured = 0            # frames measured at the nose wheel
+        self.last_taken_ns: int | None = None
+        self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
+        self.slow_since_ns: int | None = None   # when slow down (or nearer) was first shown, continuously
 
     def reset(self) -> None:
-        self.filter.reset()
-        self.last_stamp_ns = None
+        self.restart()
+        self.last_stamp_ns = self.last_taken_ns = None
         self.showing_stop = False
+
+    def restart(self) -> None:
+        """The smoothing starts afresh: no rate, and no approach followed yet."""
+        self.filter.reset()
+        self.farthest_m = float("nan")
+        self.slow_since_ns = None
 
     def configure(self, config: GuidanceConfig) -> None:
         """New constants (the stand and the aircraft type stay as they were built)."""
         self.config = replace(config, stand_file=self.config.stand_file, aircraft_type=self.config.aircraft_type)
         self.filter.accel_sigma = config.accel_sigma
 
-    def measure(self, quad: np.ndarray) -> tuple[GuidanceResult, float]:
-        """One frame's unsmoothed guidance figures and the fused depth's sigma [m]."""
+    def measure_gear(self, image: np.ndarray, quad: np.ndarray | None) -> np.ndarray:
+        """The nose wheel's ground contact in ``image`` (grey or BGR) under the tracked ``quad``: one
+        :data:`~aircraft_docking_tracker.docking.nose_gear.NOSE_GEAR_DTYPE` row (NaN where not measured)."""
         cfg = self.config
+        if quad is None or cfg.gear_min_height_px <= 0:
+            return np.full(1, np.nan, NOSE_GEAR_DTYPE)
+        grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+        return measure_nose_gear(grey, quad, self.aircraft.nose_in_template, self.aircraft.ground_in_template,
+                                 self.vertical_at(quad), min_height_px=cfg.gear_min_height_px, search=cfg.gear_search,
+                                 window=cfg.gear_window, band=cfg.gear_band, min_symmetry=cfg.gear_min_symmetry,
+                                 min_contrast=cfg.gear_min_contrast)
+
+    def vertical_at(self, quad: np.ndarray) -> np.ndarray | None:
+        """The image direction of the apron's vertical (down) at the tracked nose, from the calibrated camera."""
+        camera = self.stand.camera
+        extent = vertical_extent(quad)
+        if not extent > 0:
+            return None
+        nose = camera.point_at_depth(template_point(quad, self.aircraft.nose_in_template),
+                                     camera.focal_px * self.aircraft.height_m / extent)[0]
+        down = np.diff(camera.project([nose, nose - (0.0, 0.0, 1.0)]), axis=0)[0]
+        return down if np.isfinite(down).all() and np.linalg.norm(down) > 0 else None
+
+    def measure(self, quad: np.ndarray, gear: np.ndarray | None = None) -> tuple[GuidanceResult, float, float]:
+        """One frame's unsmoothed guidance figures, the fused depth's sigma and the lateral offset's [m]."""
+        cfg = self.config
+        measured = gear is not None and bool(np.isfinite(gear["ground_y"]).all())
         nose, point, depth_ground, depth_size, sigma = locate_nose(self.stand, self.aircraft, quad, cfg.pixel_sigma,
-                                                                   cfg.size_sigma)
+                                                                   cfg.size_sigma, gear if measured else None,
+                                                                   cfg.gear_pixel_sigma)
         result = GuidanceResult(TRACKING, nose_px=nose, nose_stand=point, depth_ground_m=depth_ground,
-                                depth_size_m=depth_size)
+                                depth_size_m=depth_size, gear_measured=measured)
+        lateral_sigma = float("nan")
         if np.isfinite(point).all():
             arc, result.lateral_m = along_line(self.stand.lead_in, point)
             result.distance_m = self.stop_arc - arc
-        return result, sigma
+            lateral_sigma = (cfg.gear_pixel_sigma if measured else cfg.pixel_sigma) \
+                * float(np.linalg.norm(point - self.stand.camera.centre)) / self.stand.camera.focal_px
+        return result, sigma, lateral_sigma
 
-    def update(self, quad: np.ndarray | None, tracking: bool, lost: bool, stamp_ns: int) -> GuidanceResult:
+    def update(self, quad: np.ndarray | None, tracking: bool, lost: bool, stamp_ns: int,
+               gear: np.ndarray | None = None) -> GuidanceResult:
         """The guidance for one frame: ``quad`` the tracked quadrilateral (None while waiting), ``tracking``
-        whether the tracker reports it, ``lost`` whether it lost it."""
+        whether the tracker reports it, ``lost`` whether it lost it, ``gear`` this frame's
+        :meth:`measure_gear` (None: the quadrilateral alone)."""
         cfg = self.config
         if quad is None or not (tracking or lost):
             self.reset()
@@ -265,41 +390,73 @@ class DockingGuidance:
         if lost:
             self.reset()
             return GuidanceResult(LOST)
-        result, sigma = self.measure(quad)
+        result, sigma, lateral_sigma = self.measure(quad, gear)
         if not np.isfinite(result.distance_m):
             self.reset()
             return GuidanceResult(LOST, nose_px=result.nose_px)
+        self.gear_measured += result.gear_measured
         dt = (stamp_ns - self.last_stamp_ns) * 1e-9 if self.last_stamp_ns is not None else 0.0
         if self.last_stamp_ns is not None and not (0.0 < dt <= cfg.max_gap_s):
             self.restarts += 1
-            self.filter.reset()
+            self.restart()
+        elif self.last_taken_ns is not None and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.max_gap_s:
+            self.restart()               # rejected for longer than a gap: the aircraft is where it is now
         self.last_stamp_ns = stamp_ns
-        lateral_sigma = cfg.pixel_sigma * float(np.linalg.norm(result.nose_stand - self.stand.camera.centre)) \
-            / self.stand.camera.focal_px
-        (distance, rate), (lateral, _) = self.filter.step(dt, [result.distance_m, result.lateral_m],
-                                                          [sigma ** 2, lateral_sigma ** 2])
+        filtered, taken = self.filter.step(dt, [result.distance_m, result.lateral_m], [sigma ** 2, lateral_sigma ** 2],
+                                           cfg.gate_sigma)
+        self.filter.x[:, 1] = np.clip(self.filter.x[:, 1], -cfg.max_speed_mps, cfg.max_speed_mps)
+        (distance, _), (lateral, _) = filtered
+        rate = float(self.filter.x[0, 1])
+        if taken:
+            self.last_taken_ns = stamp_ns
+        else:
+            self.rejected += 1
+        result.measurement_taken = taken
         result.distance_m, result.lateral_m, result.speed_mps = float(distance), float(lateral), float(-rate)
-        result.state = display_state(result.distance_m, self.showing_stop, cfg)
+        if taken:
+            self.farthest_m = float(np.fmax(self.farthest_m, distance))
+        # STOP and overshoot come on with a measurement, never with a prediction alone (STOP shown stays on), after
+        # an approach followed and slow down shown long enough
+        in_zone_s = (stamp_ns - self.slow_since_ns) * 1e-9 if self.slow_since_ns is not None else 0.0
+        ready = taken and self.farthest_m - result.distance_m >= cfg.approach_m and in_zone_s >= cfg.slow_down_min_s
+        result.state = STOP if self.showing_stop and not taken else display_state(
+            result.distance_m, self.showing_stop, cfg, ready)
+        if result.state == TRACKING:
+            self.slow_since_ns = None
+        elif self.slow_since_ns is None:
+            self.slow_since_ns = stamp_ns
         self.showing_stop = result.state == STOP
         return result
 
+    def guide_frame(self, image: np.ndarray, quad: np.ndarray | None, tracking: bool, lost: bool,
+                    stamp_ns: int) -> GuidanceResult:
+        """:meth:`update` for one frame (grey or BGR), the nose wheel measured in it while tracking: what the node
+        and ``sot_track`` call per frame."""
+        gear = self.measure_gear(image, quad) if quad is not None and tracking else None
+        return self.update(quad, tracking, lost, stamp_ns, gear)
+
 
 def guide_track(guidance: DockingGuidance, quads: np.ndarray, tracking: np.ndarray, lost: np.ndarray,
-                stamps_ns) -> np.ndarray:
+                stamps_ns, gears: np.ndarray | None = None) -> np.ndarray:
     """:meth:`DockingGuidance.update` over a whole tracked run (quadrilaterals NaN while waiting), as the node
-    calls it frame by frame; one ``GUIDANCE_DTYPE`` row per frame."""
+    calls it frame by frame, with each frame's :meth:`~DockingGuidance.measure_gear` row from ``gears`` if given
+    (measured while tracking: it needs the frame); one ``GUIDANCE_DTYPE`` row per frame."""
     rows = np.zeros(len(quads), dtype=GUIDANCE_DTYPE)
     for i, (quad, is_tracking, is_lost, stamp) in enumerate(zip(quads, tracking, lost, stamps_ns)):
         known = np.isfinite(quad).all()
-        rows[i] = guidance.update(quad if known else None, bool(is_tracking), bool(is_lost), int(stamp)).row()[0]
+        gear = gears[i:i + 1] if gears is not None else None
+        rows[i] = guidance.update(quad if known else None, bool(is_tracking), bool(is_lost), int(stamp),
+                                  gear).row()[0]
     return rows
 
 
-def display_state(distance: float, showing_stop: bool, config: GuidanceConfig) -> int:
-    """The state shown for a distance to go (step 5), given whether STOP is shown now."""
-    if distance < -config.overshoot_m:
+def display_state(distance: float, showing_stop: bool, config: GuidanceConfig, approached: bool = True) -> int:
+    """The state shown for a distance to go (step 5), given whether STOP is shown now and whether the nose was
+    followed ``approach_m`` towards the mark (if not, slow down stands for STOP and overshoot)."""
+    if approached and distance < -config.overshoot_m:
         return OVERSHOOT
-    if distance <= config.stop_m or (showing_stop and distance <= config.stop_m + config.stop_release_m):
+    if approached and (distance <= config.stop_m or (showing_stop and distance <= config.stop_m
+                                                     + config.stop_release_m)):
         return STOP
     return SLOW_DOWN if distance <= config.slow_down_m else TRACKING
 

@@ -13,7 +13,8 @@ A stand file (``config/stands/*.yaml``, documented there) holds what a surveyor 
   along the line to its foot), the nose height above the apron [m], the tracked template's height
   [m] (ground to fin top: the extent a tracked quadrilateral's vertical sides span, which a turn does
   not shorten), the wingspan [m], and where the nose sits in the tracked template
-  (``nose_in_template``: fractions of its width and height).
+  (``nose_in_template``: fractions of its width and height); optionally how far behind the nose the
+  nose wheel touches the apron (``nose_gear_setback_m``, 0 if left out).
 
 Stand frame: metres, z up; any origin and axes on the apron (the marks fix them). Every check
 raises :class:`~aircraft_docking_tracker.config.ConfigError` with the key path in the message.
@@ -39,6 +40,12 @@ class AircraftType:
     height_m: float                    # tracked template's vertical extent [m]
     wingspan_m: float
     nose_in_template: np.ndarray       # (2,) fractions of the template's width, height
+    nose_gear_setback_m: float = 0.0   # how far behind the nose the nose wheel touches the apron [m]
+
+    @property
+    def ground_in_template(self) -> float:
+        """The apron's row under the nose (the nose wheel's ground contact) as a fraction of the template's height."""
+        return float(self.nose_in_template[1] + self.nose_height_m / self.height_m)
 
 
 class StandCamera:
@@ -201,10 +208,14 @@ def parse_stand(data: dict, name: str = "stand") -> StandCalibration:
         if ((nose < 0) | (nose > 1)).any():
             raise ConfigError(f"{path}.nose_in_template: fractions in [0, 1], got {nose.tolist()}",
                               (f"{path}.nose_in_template",))
+        setback = entry.get("nose_gear_setback_m", 0.0)
+        if isinstance(setback, bool) or not isinstance(setback, (int, float)) or not 0 <= setback < 100:
+            raise ConfigError(f"{path}.nose_gear_setback_m: a distance in [0, 100) m, got {setback!r}",
+                              (f"{path}.nose_gear_setback_m",))
         aircraft[str(type_name)] = AircraftType(
             str(type_name), _points(entry.get("stop_m"), f"{path}.stop_m", 1)[0],
             _positive(entry, "nose_height_m", path), _positive(entry, "height_m", path),
-            _positive(entry, "wingspan_m", path), nose)
+            _positive(entry, "wingspan_m", path), nose, float(setback))
     return StandCalibration(str(data.get("stand", name)), camera, lead_in, aircraft, error)
 
 
@@ -247,6 +258,8 @@ STAND_FILE_HEADER = """\
 #   height_m: the tracked template's height, ground to fin top [m] (range from the apparent size)
 #   wingspan_m: wingspan [m]
 #   nose_in_template: [u, v] where the nose sits in the tracked template, fractions of its width and height
+#   nose_gear_setback_m: how far behind the nose the nose wheel touches the apron [m] (optional, 0; the
+#     guidance measures the wheel's ground contact near the stop and puts the nose this far ahead of it)
 """
 
 

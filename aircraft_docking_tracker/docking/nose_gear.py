@@ -1,0 +1,158 @@
+"""The nose wheel's ground contact, measured in the image on the aircraft's symmetry axis (no ROS).
+
+Near the stop the docking aircraft is large in the stand camera's image (150-270 px tall in the
+synthetic stands), but the tracked quadrilateral carries whole-aircraft errors there: a few percent
+of size (a range error of metres at 40-60 m) and tens of pixels sideways when a jet bridge hides a
+wing. What a pilot is guided by is one point, the nose, and seen nose-on two things in the image
+pin it down without the template:
+
+1. **The symmetry axis.** Seen nose-on an aircraft is mirror-symmetric about the vertical plane
+   through its fuselage. In an upright strip resampled about the tracked nose (1 px per image pixel,
+   its columns along the apron's vertical as the calibrated camera sees it there: the tracked
+   template's own vertical is only as good as the tracker's rotation, measured up to 20 degrees off
+   late in an approach, and about a tilted line a fuselage is not symmetric but an engine's round
+   cowl still is), the axis is the column ``c`` whose left
+   neighbourhood best matches its mirrored right one over the nose's rows: the normalised
+   correlation of ``strip[rows, c-K:c]`` with ``strip[rows, c+1:c+K+1]`` flipped, searched within
+   ``search`` template heights of the tracked nose, refined to a sub-pixel by a parabola through the
+   best three scores. ``K`` is ``window`` template heights (about the fuselage's half-width).
+2. **The ground contact** on that axis: the nose wheel (a dark tyre) meets the lit apron in a step
+   of the column's grey profile (averaged over ``band`` template heights either side of the axis),
+   dark above, bright below. It is the row with the largest step within ``window`` template heights
+   of where the template puts it (the nose's row plus the type's nose height), the step being the
+   darker of two apron bands below the row less the tyre's rows above it (:func:`tyre_steps`: a
+   painted stop bar under the axis has apron above it and is bright in its first band only, and was
+   taken for the contact when the step was the profile's derivative alone); the edge is then placed
+   to a sub-pixel at the derivative's peak beside that row, by a parabola. The contact is on the apron (z = 0), so its range comes
+   from the calibrated ground plane with the camera's whole height above it, where the nose's own
+   row (z = nose height) has only the camera's height above the nose: a pixel there is
+   Z^2 / (f h_camera) metres of range instead of Z^2 / (f (h_camera - h_nose)).
+
+A measurement is refused (the caller falls back to the tracked quadrilateral) when the template is
+under ``min_height_px`` tall, when the best symmetry score is under ``min_symmetry``, when the step
+is under ``min_contrast`` grey levels, or when the strip leaves the image.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+#: One frame's measurement, in image pixels; NaN where nothing was measured.
+NOSE_GEAR_DTYPE = np.dtype([("axis_x", "<f8"), ("axis_y", "<f8"), ("ground_x", "<f8"), ("ground_y", "<f8"),
+                            ("symmetry", "<f8"), ("contrast", "<f8")])
+
+
+TYRE = 0.03        # the tyre's rows above the contact that are compared [template heights]
+APRON = 0.015      # each of the two apron bands below it [template heights]
+
+
+def tyre_steps(profile: np.ndarray, above: int, below: int) -> np.ndarray:
+    """Per row r of a grey profile (going down), the step from the tyre to the apron between r and r + 1: the
+    darker of the two bands of ``below`` rows under it, less the mean of the ``above`` rows down to r. A painted
+    line under the axis is bright only in its first band, so it is no step; a tyre on the apron is both.
+    -inf where the bands leave the profile."""
+    sums = np.concatenate([[0.0], np.cumsum(profile, dtype=np.float64)])
+    n = len(profile)
+    r = np.arange(n)
+    ok = (r - above + 1 >= 0) & (r + 2 * below < n)
+    rc = np.clip(r, above - 1, n - 1 - 2 * below)
+    tyre = (sums[rc + 1] - sums[rc + 1 - above]) / above
+    near = (sums[rc + 1 + below] - sums[rc + 1]) / below
+    far = (sums[rc + 1 + 2 * below] - sums[rc + 1 + below]) / below
+    return np.where(ok, np.minimum(near, far) - tyre, -np.inf)
+
+
+def _parabola_peak(scores: np.ndarray, i: int) -> float:
+    """Sub-sample offset of the peak at ``i`` from a parabola through it and its neighbours."""
+    if 0 < i < len(scores) - 1:
+        curvature = scores[i - 1] - 2.0 * scores[i] + scores[i + 1]
+        if curvature < 0:
+            return float(np.clip(0.5 * (scores[i - 1] - scores[i + 1]) / curvature, -0.5, 0.5))
+    return 0.0
+
+
+def mirror_scores(rows: np.ndarray, columns: np.ndarray, half_width: int) -> np.ndarray:
+    """Normalised correlation of each candidate column's left neighbourhood with its mirrored right one."""
+    scores = np.full(len(columns), -1.0)
+    for k, c in enumerate(columns):
+        left = rows[:, c - half_width:c]
+        right = rows[:, c + 1:c + half_width + 1][:, ::-1]
+        left, right = left - left.mean(), right - right.mean()
+        norm = np.sqrt((left * left).sum() * (right * right).sum())
+        if norm > 0:
+            scores[k] = float((left * right).sum() / norm)
+    return scores
+
+
+def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, ground_in_template: float,
+                      down=None, *,
+                      min_height_px: float = 80.0, search: float = 0.5, window: float = 0.12, band: float = 0.02,
+                      min_symmetry: float = 0.5, min_contrast: float = 12.0) -> np.ndarray:
+    """One :data:`NOSE_GEAR_DTYPE` row: the symmetry axis at the nose's row and the nose wheel's ground
+    contact (image pixels) of the aircraft tracked as ``quad`` (TL, TR, BR, BL) in the grey image ``grey``.
+    ``ground_in_template`` is the contact's fraction of the template's height; ``down`` the image direction of
+    the apron's vertical at the nose (from the calibrated camera; None: the template's own vertical, which
+    a tracker's rotation error tilts); the other arguments are the module docstring's (``guidance.gear_*``).
+    NaN where refused."""
+    row = np.full(1, np.nan, NOSE_GEAR_DTYPE)
+    quad = np.asarray(quad, np.float64)
+    if grey.ndim != 2 or not np.isfinite(quad).all():
+        return row
+    sides = 0.5 * ((quad[3] - quad[0]) + (quad[2] - quad[1]))
+    height = float(np.linalg.norm(sides))
+    if min_height_px <= 0 or height < min_height_px:
+        return row
+    down = np.asarray(down if down is not None else sides, np.float64)
+    down = down / np.linalg.norm(down)
+    right = np.array([down[1], -down[0]])
+    u, v = nose_in_template
+    nose = quad[0] + u * (quad[1] - quad[0]) + v * (quad[3] - quad[0])
+    half_window = max(2, int(round(window * height)))
+    reach = max(1, int(round(search * height)))
+    half = reach + half_window + 1
+    top = half_window + 1                                   # strip rows above the nose's row
+    bottom = int(np.ceil((ground_in_template - v) * height)) + half_window + int(np.ceil(2 * APRON * height)) + 6
+    # strip (a, b) -> image: nose + (a - half) right + (b - top) down
+    to_image = np.array([[right[0], down[0], nose[0] - half * right[0] - top * down[0]],
+                         [right[1], down[1], nose[1] - half * right[1] - top * down[1]]])
+    corners = np.array([[0, 0, 1], [2 * half, 0, 1], [0, top + bottom, 1], [2 * half, top + bottom, 1]]) @ to_image.T
+    h_img, w_img = grey.shape
+    if (corners < 0).any() or (corners[:, 0] > w_img - 1).any() or (corners[:, 1] > h_img - 1).any():
+        return row
+    strip = cv2.warpAffine(grey, to_image, (2 * half + 1, top + bottom + 1),
+                           flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP).astype(np.float32)
+    # 1. the symmetry axis over the nose's rows
+    columns = np.arange(half - reach, half + reach + 1)
+    scores = mirror_scores(strip[top - half_window:top + half_window + 1], columns, half_window)
+    best = int(np.argmax(scores))
+    axis = columns[best] + _parabola_peak(scores, best)
+    row["symmetry"] = scores[best]
+    row["axis_x"], row["axis_y"] = to_image @ np.array([axis, top, 1.0])
+    if scores[best] < min_symmetry:
+        return row
+    # 2. the ground contact on it: the strongest tyre-to-apron step going down, near where the template puts it
+    band = max(1, int(round(band * height)))
+    c = int(round(axis))
+    profile = strip[:, c - band:c + band + 1].mean(axis=1)
+    step = tyre_steps(profile, max(2, int(round(TYRE * height))), max(2, int(round(APRON * height))))
+    expected = top + (ground_in_template - v) * height
+    lo, hi = max(2, int(expected) - half_window), min(len(profile) - 3, int(expected) + half_window)
+    if hi <= lo:
+        return row
+    j = lo + int(np.argmax(step[lo:hi + 1]))
+    row["contrast"] = step[j]
+    if step[j] < min_contrast:
+        return row
+    rise = np.zeros_like(profile)                    # the edge itself: the central difference's peak by it
+    rise[1:-1] = 0.5 * (profile[2:] - profile[:-2])
+    k = j + int(np.argmax(rise[j:j + 2]))
+    contact = k + _parabola_peak(rise, k)
+    row["ground_x"], row["ground_y"] = to_image @ np.array([axis, contact, 1.0])
+    return row
+    j = lo + int(np.argmax(rise[lo:hi + 1]))
+    row["contrast"] = 2.0 * rise[j]
+    if row["contrast"][0] < min_contrast:
+        return row
+    contact = j + _parabola_peak(rise, j)
+    row["ground_x"], row["ground_y"] = to_image @ np.array([axis, contact, 1.0])
+    return row
