@@ -227,9 +227,9 @@ class DockingProcessor(MessageProcessor):
                    msg.header, "docking", result.quad if result.matrix is not None else None,
                    COLORS.get(result.state, COLORS[TRACKING])))]
         if self.guidance is not None:
-            guidance = self.guidance.update(result.quad if result.matrix is not None else None,
-                                            result.state == TRACKING, result.state == LOST,
-                                            stamp_to_ns(msg.header.stamp))
+            guidance = self.guidance.guide_frame(frame, result.quad if result.matrix is not None else None,
+                                                 result.state == TRACKING, result.state == LOST,
+                                                 stamp_to_ns(msg.header.stamp))
             self.last_guidance = guidance
             out.append(("docking/guidance", table_to_cloud(guidance.row(), msg.header)))
             out.append(("docking/guidance_markers", self._guidance_markers(msg.header, guidance)))
@@ -319,6 +319,8 @@ class DockingProcessor(MessageProcessor):
             values.update({"guidance state": GUIDANCE_STATES[g.state], "distance to go m": f"{g.distance_m:.2f}",
                            "lateral m": f"{g.lateral_m:.2f}", "closing speed m/s": f"{g.speed_mps:.2f}",
                            "guidance smoothing restarts": self.guidance.restarts,
+                           "guidance jumps rejected": self.guidance.rejected,
+                           "guidance frames measured at the nose wheel": self.guidance.gear_measured,
                            "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name})
         return values
 

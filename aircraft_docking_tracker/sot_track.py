@@ -13,14 +13,16 @@ TinyTLP ``groundtruth_rect.txt`` beside the frames, or the bag's ``ground_truth/
 prints the OTB success AUC and precision at 20 px. Parameters: ``config/docking_tracker.yaml``
 (``--params-file``) overridden by ``--name value`` options, the very same dataclass as the node.
 
-With a stand file (``--guidance.stand-file``) the run is also guided by the node's guidance core
-(:func:`~aircraft_docking_tracker.docking.guidance.guide_track`, at the bag's image stamps or ``--fps``);
+With a stand file (``--guidance.stand-file``) each frame is also guided as the node guides it
+(:meth:`~aircraft_docking_tracker.docking.guidance.DockingGuidance.guide_frame`: the nose wheel measured
+in the frame, at the bag's image stamps or ``--fps``);
 ``--guidance`` writes ``frame,distance_m,lateral_m,speed_mps,state`` per frame, and a bag's
 ``ground_truth/guidance`` is scored (``evaluation.guidance_metrics``).
 """
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import time
 from dataclasses import dataclass, field
@@ -34,7 +36,7 @@ from tqdm import tqdm
 from .config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from .io.bag import check_outputs
 from .docking.guidance import GuidanceConfig
-from .docking.tracker import DockingConfig, DockingTracker
+from .docking.tracker import LOST, TRACKING, DockingConfig, DockingTracker
 from .geometry import quad_to_box
 
 NODE_NAME = "docking_tracker"
@@ -73,6 +75,7 @@ class TrackRun:
     step_seconds: np.ndarray
     extra: dict = field(default_factory=dict)
     stopped: str | None = None  # why the run ended before the sequence did (a frame that does not read)
+    guidance: np.ndarray | None = None  # with a DockingGuidance: one GUIDANCE_DTYPE row per frame
 
     @property
     def boxes(self) -> np.ndarray:
@@ -174,7 +177,8 @@ def _bag_sequence(path: Path, image_topic: str = "image", gt_topic: str = "groun
 
 # --------------------------------------------------------------------------- the run
 def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int | None = None,
-          progress: bool = True, desc: str = "sot_track", detections: Iterable | None = None) -> TrackRun:
+          progress: bool = True, desc: str = "sot_track", detections: Iterable | None = None,
+          guidance=None, stamps: Iterable[int] | None = None) -> TrackRun:
     """Run the docking tracker over ``frames`` (grey, or BGR: tracked in grey) from ``init`` (box, quadrilateral or
     state; None: wait for a detection).
 
@@ -183,11 +187,13 @@ def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int 
     table from ``detections`` if any (re-acquisition and the override rule, as the node does). A
     frame that cannot be read or decoded (a ``ValueError`` from ``frames``) ends the run: what came
     before it is kept and ``TrackRun.stopped`` says which frame and why. Frames without a track
-    (waiting) have NaN quadrilaterals.
+    (waiting) have NaN quadrilaterals. With ``guidance`` (a ``DockingGuidance``) each frame is also guided, at
+    its stamp from ``stamps`` [ns].
     """
     tracker = DockingTracker(config)
     tables = iter(detections) if detections is not None else None
-    quads, states, scores, particles, seconds = [], [], [], [], []
+    quads, states, scores, particles, seconds, guided = [], [], [], [], [], []
+    stamp_iter = iter(stamps) if stamps is not None else None
     stopped = None
     iterator = iter(frames)
     bar = tqdm(total=count, desc=desc, disable=not progress, unit="frame")
@@ -209,12 +215,15 @@ def track(frames: Iterable[np.ndarray], init, config: DockingConfig, count: int 
         states.append(result.state)
         scores.append(result.score)
         particles.append(result.particles)
+        if guidance is not None:
+            guided.append(guidance.guide_frame(frame, result.quad, result.state == TRACKING, result.state == LOST,
+                                               int(next(stamp_iter))).row()[0])
         index += 1
     bar.close()
     if not quads:
         raise SequenceError(stopped or "the sequence has no frames")
     return TrackRun(np.array(quads), np.array(states), np.array(scores), np.array(particles), np.array(seconds),
-                    stopped=stopped)
+                    stopped=stopped, guidance=np.array(guided) if guidance is not None else None)
 
 
 def score_run(run: TrackRun, gt: np.ndarray) -> dict:
@@ -258,18 +267,17 @@ def guidance_config(args, base: dict) -> GuidanceConfig:
     return config_from_arguments(GuidanceConfig, args, GUIDANCE_PREFIX, base=own)
 
 
-def guide_run(run: TrackRun, config: GuidanceConfig, stamps: list | None, fps: float) -> np.ndarray:
-    """The node's guidance over a finished run (the guidance needs only each frame's quadrilateral, state and
-    stamp, so it is the same computation as frame by frame)."""
-    from .docking.guidance import DockingGuidance, guide_track  # noqa: PLC0415
+def guidance_for(config: GuidanceConfig, stamps: list | None, fps: float):
+    """(a ``DockingGuidance`` for the stand file, the frames' stamps [ns]: the bag's, or ``fps`` apart), or
+    (None, None) without a stand file."""
+    if not config.stand_file:
+        return None, None
+    from .docking.guidance import DockingGuidance  # noqa: PLC0415
     from .docking.stand import load_stand  # noqa: PLC0415
-    from .docking.tracker import LOST, TRACKING  # noqa: PLC0415
 
-    n = len(run.quads)
-    if stamps is None or any(s is None for s in stamps[:n]):
-        stamps = [round(i * 1e9 / fps) for i in range(n)]
-    guidance = DockingGuidance(load_stand(config.stand_file), config)
-    return guide_track(guidance, run.quads, run.states == TRACKING, run.states == LOST, stamps[:n])
+    if stamps is None or any(s is None for s in stamps):
+        stamps = (round(i * 1e9 / fps) for i in itertools.count())
+    return DockingGuidance(load_stand(config.stand_file), config), stamps
 
 
 def main(argv=None) -> int:
@@ -296,15 +304,16 @@ def main(argv=None) -> int:
         if args.max_frames > 0:
             frames = (f for i, f in zip(range(args.max_frames), frames))
             count = min(count or args.max_frames, args.max_frames)
-        run = track(frames, init, config, count, progress=not args.no_progress)
+        guidance, stamps = guidance_for(guided, seq.stamps, args.fps)
+        run = track(frames, init, config, count, progress=not args.no_progress, guidance=guidance, stamps=stamps)
     except (ConfigError, ValueError, OSError) as exc:
         print(f"sot_track: {exc}", file=sys.stderr)
         return 2
     write_results(run, args.out, args.quads)
     n = len(run.quads)
     guidance_line = ""
-    if guided.stand_file:
-        rows = guide_run(run, guided, seq.stamps, args.fps)
+    if run.guidance is not None:
+        rows = run.guidance
         if args.guidance:
             np.savetxt(args.guidance, np.c_[np.arange(n), rows["distance_m"], rows["lateral_m"], rows["speed_mps"],
                                             rows["state"]], fmt=["%d", "%.3f", "%.3f", "%.3f", "%d"], delimiter=",",

@@ -234,6 +234,29 @@ def test_guidance_outputs_with_a_stand_file(tmp_path):
         DockingProcessor(DockingConfig(), DockingNodeConfig(), GuidanceConfig(stand_file=str(tmp_path / "broken.yaml")))
 
 
+def test_guidance_measures_the_nose_wheel_near_the_stop(tmp_path):
+    """Near the stop the node measures the nose wheel in each frame (counted in the status), and the distance to
+    go comes out within a metre (a 60-frame approach: 10 m/s 15 m out, the smoothing lags a little)."""
+    from aircraft_docking_tracker.docking.stand import stand_file_text
+    from aircraft_docking_tracker.scenarios.docking import DockingScene, DockingSceneConfig
+
+    scene = DockingScene(DockingSceneConfig(frames=60, weather="clear", occluder="none"), seed=5)
+    stand = tmp_path / "stand.yaml"
+    stand.write_text(stand_file_text(scene.stand_calibration()))
+    frames = [f for f in scene.frames() if f.index >= 44]
+    proc = DockingProcessor(DockingConfig(), DockingNodeConfig(), GuidanceConfig(stand_file=str(stand)))
+    stats = ProcessingStats()
+    start = PolygonStamped(header=header(0))
+    start.polygon.points = [Point32(x=float(x), y=float(y)) for x, y in frames[0].quad]
+    process_guarded(proc, "docking/init", start, stats)
+    errors = []
+    for k, frame in enumerate(frames):
+        out = dict(process_guarded(proc, "image", numpy_to_image(frame.image, "bgr8", header(k)), stats))
+        errors.append(cloud_to_table(out["docking/guidance"], GUIDANCE_DTYPE)["distance_m"][0] - frame.guidance[0])
+    assert proc.status()["guidance frames measured at the nose wheel"] >= len(frames) - 2
+    assert np.nanmax(np.abs(errors[2:])) < 1.0
+
+
 def test_a_broken_stand_file_is_refused_at_start_and_the_node_tracks_without_guidance(tmp_path):
     """guidance.stand_file is start-up only (read-only): a file that does not load is refused as any bad value is
     (logged, listed, its default kept), the node runs without the guidance topics; a good one publishes them."""
