@@ -14,8 +14,9 @@ pin it down without the template:
    cowl still is), the axis is the column ``c`` whose left
    neighbourhood best matches its mirrored right one over the nose's rows: the normalised
    correlation of ``strip[rows, c-K:c]`` with ``strip[rows, c+1:c+K+1]`` flipped, searched within
-   ``search`` template heights of the tracked nose, refined to a sub-pixel by a parabola through the
-   best three scores. ``K`` is ``window`` template heights (about the fuselage's half-width).
+   ``search`` template heights of the tracked nose (every other column on every other row first,
+   then every column and row about its three best peaks), refined to a sub-pixel by a parabola through the best three
+   scores. ``K`` is ``window`` template heights (about the fuselage's half-width).
 2. **The ground contact** on that axis: the nose wheel (a dark tyre) meets the lit apron in a step
    of the column's grey profile (averaged over ``band`` template heights either side of the axis),
    dark above, bright below. It is the row with the largest step within ``window`` template heights
@@ -42,6 +43,7 @@ NOSE_GEAR_DTYPE = np.dtype([("axis_x", "<f8"), ("axis_y", "<f8"), ("ground_x", "
                             ("symmetry", "<f8"), ("contrast", "<f8")])
 
 
+COARSE_PEAKS = 3   # the coarse symmetry search's peaks refined at full resolution
 TYRE = 0.03        # the tyre's rows above the contact that are compared [template heights]
 APRON = 0.015      # each of the two apron bands below it [template heights]
 
@@ -72,16 +74,16 @@ def _parabola_peak(scores: np.ndarray, i: int) -> float:
 
 
 def mirror_scores(rows: np.ndarray, columns: np.ndarray, half_width: int) -> np.ndarray:
-    """Normalised correlation of each candidate column's left neighbourhood with its mirrored right one."""
-    scores = np.full(len(columns), -1.0)
-    for k, c in enumerate(columns):
-        left = rows[:, c - half_width:c]
-        right = rows[:, c + 1:c + half_width + 1][:, ::-1]
-        left, right = left - left.mean(), right - right.mean()
-        norm = np.sqrt((left * left).sum() * (right * right).sum())
-        if norm > 0:
-            scores[k] = float((left * right).sum() / norm)
-    return scores
+    """Normalised correlation of each candidate column's left neighbourhood (``half_width`` columns) with its mirrored
+    right one, over ``rows``; every candidate at once (the columns need ``half_width`` of room either side)."""
+    windows = np.lib.stride_tricks.sliding_window_view(rows, half_width, axis=1)     # (rows, start, k)
+    left = windows[:, columns - half_width]                                          # columns c-K .. c-1
+    right = windows[:, columns + 1, ::-1]                                            # c+K .. c+1, mirrored
+    left = left - left.mean(axis=(0, 2), keepdims=True)
+    right = right - right.mean(axis=(0, 2), keepdims=True)
+    cross = np.einsum("rck,rck->c", left, right)
+    norm = np.sqrt(np.einsum("rck,rck->c", left, left) * np.einsum("rck,rck->c", right, right))
+    return np.where(norm > 0, cross / np.where(norm > 0, norm, 1.0), -1.0)
 
 
 def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, ground_in_template: float,
@@ -121,9 +123,16 @@ def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, grou
         return row
     strip = cv2.warpAffine(grey, to_image, (2 * half + 1, top + bottom + 1),
                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP).astype(np.float32)
-    # 1. the symmetry axis over the nose's rows
-    columns = np.arange(half - reach, half + reach + 1)
-    scores = mirror_scores(strip[top - half_window:top + half_window + 1], columns, half_window)
+    # 1. the symmetry axis over the nose's rows: every other column on every other row, then every column and row
+    #    about the best few peaks (the fuselage's and an engine's can swap places on the coarse grid)
+    rows = strip[top - half_window:top + half_window + 1]
+    coarse = np.arange(half - reach, half + reach + 1, 2)
+    rough = mirror_scores(rows[::2], coarse, half_window)
+    padded = np.r_[-np.inf, rough, -np.inf]
+    peaks = np.flatnonzero((rough >= padded[:-2]) & (rough >= padded[2:]))
+    near = coarse[peaks[np.argsort(-rough[peaks])[:COARSE_PEAKS]]]
+    columns = np.unique(np.clip(near[:, None] + np.arange(-3, 4), half - reach, half + reach))
+    scores = mirror_scores(rows, columns, half_window)
     best = int(np.argmax(scores))
     axis = columns[best] + _parabola_peak(scores, best)
     row["symmetry"] = scores[best]
