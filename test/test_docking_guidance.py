@@ -272,3 +272,19 @@ def test_gate_rejects_a_jump_and_restarts_after_a_gap(scene, frames):
     for quad, truth, stamp, _ in frames[:200]:
         off.update(quad, True, False, stamp)
     assert off.update(jump, True, False, frames[200][2]).measurement_taken and off.rejected == 0
+
+
+def test_stop_stays_on_when_the_track_breaks_up_at_the_mark(scene, frames):
+    """STOP shown at the end of a followed approach stays on when the quadrilateral then jumps for seconds (the gate
+    restarts the smoothing on it, but a restart at the mark follows no approach); losing the aircraft clears it.
+    (The quadrilaterals are exact, so their size is trusted to 1 %: the gate then rejects a jump of a few metres.)"""
+    guidance = DockingGuidance(parse_stand(scene.stand_calibration()), GuidanceConfig(size_sigma=0.01))
+    for quad, _, stamp, _ in frames:
+        state = guidance.update(quad, True, False, stamp).state
+    assert state == STOP
+    quad, _, stamp, _ = frames[-1]
+    broken = quad.mean(axis=0) + (quad - quad.mean(axis=0)) * 0.7          # 30 % smaller: "20 m back"
+    states = [guidance.update(broken, True, False, stamp + (k + 1) * NS // 14).state for k in range(40)]
+    assert guidance.rejected >= 10 and set(states) == {STOP}
+    assert guidance.update(broken, False, True, stamp + 41 * NS // 14).state == LOST
+    assert guidance.update(broken, True, False, stamp + 42 * NS // 14).state != STOP

@@ -47,7 +47,9 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    standing near the mark (a vehicle, the jet bridge) shows no STOP; slow down must have been shown for
    ``slow_down_min_s`` first, continuously (a tracker that slips between the aircraft and the clutter makes
    the figure jump across the zone in a frame); and STOP and overshoot come on only on a frame whose
-   measurement was taken, never while the gate holds the prediction.
+   measurement was taken, never while the gate holds the prediction. STOP, once shown, is cleared only by a
+   measurement of a followed approach (or by the tracker losing the aircraft): a smoothing that restarted
+   at the mark -- a tracker that breaks up once the aircraft has stood there -- keeps it on.
 """
 from __future__ import annotations
 
@@ -415,12 +417,12 @@ class DockingGuidance:
         result.distance_m, result.lateral_m, result.speed_mps = float(distance), float(lateral), float(-rate)
         if taken:
             self.farthest_m = float(np.fmax(self.farthest_m, distance))
-        # STOP and overshoot come on with a measurement, never with a prediction alone (STOP shown stays on), after
-        # an approach followed and slow down shown long enough
+        # STOP and overshoot come on with a measurement, never with a prediction alone, after an approach followed
+        # and slow down shown long enough; STOP shown stays on until a measurement of a followed approach clears it
         in_zone_s = (stamp_ns - self.slow_since_ns) * 1e-9 if self.slow_since_ns is not None else 0.0
-        ready = taken and self.farthest_m - result.distance_m >= cfg.approach_m and in_zone_s >= cfg.slow_down_min_s
-        result.state = STOP if self.showing_stop and not taken else display_state(
-            result.distance_m, self.showing_stop, cfg, ready)
+        followed = taken and self.farthest_m - result.distance_m >= cfg.approach_m
+        result.state = STOP if self.showing_stop and not followed else display_state(
+            result.distance_m, self.showing_stop, cfg, followed and in_zone_s >= cfg.slow_down_min_s)
         if result.state == TRACKING:
             self.slow_since_ns = None
         elif self.slow_since_ns is None:
