@@ -158,10 +158,3 @@ def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, grou
     contact = k + _parabola_peak(rise, k)
     row["ground_x"], row["ground_y"] = to_image @ np.array([axis, contact, 1.0])
     return row
-    j = lo + int(np.argmax(rise[lo:hi + 1]))
-    row["contrast"] = 2.0 * rise[j]
-    if row["contrast"][0] < min_contrast:
-        return row
-    contact = j + _parabola_peak(rise, j)
-    row["ground_x"], row["ground_y"] = to_image @ np.array([axis, contact, 1.0])
-    return row
