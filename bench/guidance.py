@@ -53,7 +53,9 @@ HELD_OUT_SEED0, TUNE_SEED0 = 200, 100
 #: --tune's grid: the neighbourhood of session 27's choice. It was reached in stages on the same tuning approaches:
 #: size_sigma {0.01, 0.03, 0.1, 0.3} x gear_pixel_sigma {0.5, 1, 2} x gate_sigma {0, 3, 5, 8} x accel_sigma
 #: {0.5, 1, 2, 4} (192 candidates), then this grid's edges pushed out; gear_min_height_px {80, 120, 160} was compared
-#: by masking the 80-px measurements (80 best: at 120 the worst run's distance p95 went from 1.2 to 15 m).
+#: by masking the 80-px measurements (80 best: at 120 the worst run's distance p95 went from 1.2 to 15 m);
+#: gear_min_contrast {12, 20, 30, 40} the same way (12 and 30 tie within the rule's rounding: 12 kept), and
+#: gate_hold_s {0.15, 0.3, 0.5, 1} with the rest fixed (1: shorter holds leave STOP unshown on 2-8 % of runs).
 GRID = {"size_sigma": [0.1, 0.3], "gear_pixel_sigma": [0.25, 0.5], "gate_sigma": [8.0, 12.0], "accel_sigma": [4.0, 8.0],
         "slow_down_min_s": [0.0, 1.5, 3.0]}
 

@@ -255,7 +255,7 @@ def test_nose_gear_setback_puts_the_nose_ahead_of_the_wheel(scene, frames):
 
 def test_gate_rejects_a_jump_and_restarts_after_a_gap(scene, frames):
     """A quadrilateral that jumps to the stop mark mid-approach is rejected and counted; the figure holds the
-    prediction. Rejected for longer than max_gap_s, the smoothing takes the new figures."""
+    prediction. Rejected for longer than gate_hold_s, the smoothing takes the new figures."""
     guidance = DockingGuidance(parse_stand(scene.stand_calibration()))
     for quad, truth, stamp, _ in frames[:200]:
         guidance.update(quad, True, False, stamp)
@@ -266,8 +266,14 @@ def test_gate_rejects_a_jump_and_restarts_after_a_gap(scene, frames):
     assert result.distance_m == pytest.approx(truth[0], abs=1.0) and result.state != STOP
     for quad, truth, stamp, _ in frames[201:230]:                 # 2 s of a wrong lock
         result = guidance.update(jump, True, False, stamp)
-    assert abs(guidance.rejected - scene.config.fps * guidance.config.max_gap_s) <= 1      # about 1 s of frames
+    assert abs(guidance.rejected - scene.config.fps * guidance.config.gate_hold_s) <= 1     # about 1 s of frames
     assert result.measurement_taken and result.distance_m < 1.0
+    short = DockingGuidance(parse_stand(scene.stand_calibration()), GuidanceConfig(gate_hold_s=0.5))
+    for quad, truth, stamp, _ in frames[:200]:
+        short.update(quad, True, False, stamp)
+    for quad, truth, stamp, _ in frames[200:230]:
+        short.update(jump, True, False, stamp)
+    assert abs(short.rejected - scene.config.fps * 0.5) <= 1 and short.restarts == 0     # not a time jump
     off = DockingGuidance(parse_stand(scene.stand_calibration()), GuidanceConfig(gate_sigma=0.0))
     for quad, truth, stamp, _ in frames[:200]:
         off.update(quad, True, False, stamp)

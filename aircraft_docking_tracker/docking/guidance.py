@@ -35,7 +35,7 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    going back, or a gap over ``max_gap_s``) restarts the filter. **Gate**: once the filter has settled
    (:data:`GATE_AFTER` measurements), a distance more than ``gate_sigma`` sigmas of the innovation
    from the prediction is rejected and counted (an aircraft does not jump; a tracker that slips onto the
-   jet bridge does), and the prediction is shown; rejected for longer than ``max_gap_s``, the filter
+   jet bridge does), and the prediction is shown; rejected for longer than ``gate_hold_s``, the filter
    restarts from the new figures. The closing rate is held within ``max_speed_mps``.
 5. **State** (as the display shows it): 0 no aircraft (the tracker waits), 1 tracking, 2 slow down
    (within ``slow_down_m`` of the mark), 3 STOP (within ``stop_m`` of the mark, or past it by less than
@@ -99,6 +99,8 @@ class GuidanceConfig:
     gate_sigma: float = param(8.0, "a measured distance further than this many sigmas from the smoothing's "
                               "prediction is rejected and counted (an aircraft does not jump); 0: no gate",
                               low=0.0, high=1000.0)
+    gate_hold_s: float = param(1.0, "rejected for longer than this [s], the smoothing restarts from the new figures "
+                               "(the gate holds its prediction until then)", low=0.0, high=60.0)
     max_speed_mps: float = param(12.0, "the smoothing's closing speed is held within this [m/s] (an aircraft taxies "
                                  "in at a few; a two-point start on noisy figures can give a rate of tens)", low=0.1,
                                  high=1000.0)
@@ -401,7 +403,7 @@ class DockingGuidance:
         if self.last_stamp_ns is not None and not (0.0 < dt <= cfg.max_gap_s):
             self.restarts += 1
             self.restart()
-        elif self.last_taken_ns is not None and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.max_gap_s:
+        elif self.last_taken_ns is not None and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.gate_hold_s:
             self.restart()               # rejected for longer than a gap: the aircraft is where it is now
         self.last_stamp_ns = stamp_ns
         filtered, taken = self.filter.step(dt, [result.distance_m, result.lateral_m], [sigma ** 2, lateral_sigma ** 2],
