@@ -220,17 +220,23 @@ def fuse_depths(depths, sigmas) -> tuple[float, float]:
     return float(np.dot(weights, depths[ok]) / weights.sum()), float(1.0 / np.sqrt(weights.sum()))
 
 
+def size_depth(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray) -> float:
+    """The nose's optical-axis depth from the template's apparent height, Z_s = f H / h (step 2) [m]."""
+    extent = vertical_extent(quad)
+    return stand.camera.focal_px * aircraft.height_m / extent if extent > 0 else float("nan")
+
+
 def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, pixel_sigma: float,
                 size_sigma: float, gear: np.ndarray | None = None,
-                gear_pixel_sigma: float = 0.7) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+                gear_pixel_sigma: float = GuidanceConfig.gear_pixel_sigma
+                ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
     """(nose pixel, fused nose point on the stand [m], depth from the ground plane, depth from the size,
     fused depth's sigma [m]) of one tracked quadrilateral (steps 1-2 of the module docstring); with a measured
     nose-wheel ground contact (``gear``, a :data:`~aircraft_docking_tracker.docking.nose_gear.NOSE_GEAR_DTYPE`
     row) the ground-plane depth is the contact's on the apron, and the nose is ``nose_gear_setback_m`` ahead
     of it along the lead-in line (step 2b)."""
     camera = stand.camera
-    extent = vertical_extent(quad)
-    depth_size = camera.focal_px * aircraft.height_m / extent if extent > 0 else np.nan
+    depth_size = size_depth(stand, aircraft, quad)
     if gear is not None and np.isfinite(gear["ground_y"]).all():
         contact = np.array([float(gear["ground_x"][0]), float(gear["ground_y"][0])])
         depth_ground, depth_below = camera.depth_on_plane([contact, contact + (0.0, 1.0)], 0.0)
@@ -357,11 +363,10 @@ class DockingGuidance:
     def vertical_at(self, quad: np.ndarray) -> np.ndarray | None:
         """The image direction of the apron's vertical (down) at the tracked nose, from the calibrated camera."""
         camera = self.stand.camera
-        extent = vertical_extent(quad)
-        if not extent > 0:
+        depth = size_depth(self.stand, self.aircraft, quad)
+        if not np.isfinite(depth):
             return None
-        nose = camera.point_at_depth(template_point(quad, self.aircraft.nose_in_template),
-                                     camera.focal_px * self.aircraft.height_m / extent)[0]
+        nose = camera.point_at_depth(template_point(quad, self.aircraft.nose_in_template), depth)[0]
         down = np.diff(camera.project([nose, nose - (0.0, 0.0, 1.0)]), axis=0)[0]
         return down if np.isfinite(down).all() and np.linalg.norm(down) > 0 else None
 
@@ -404,7 +409,7 @@ class DockingGuidance:
             self.restarts += 1
             self.restart()
         elif self.last_taken_ns is not None and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.gate_hold_s:
-            self.restart()               # rejected for longer than a gap: the aircraft is where it is now
+            self.restart()               # rejected for longer than gate_hold_s: the aircraft is where it is now
         self.last_stamp_ns = stamp_ns
         filtered, taken = self.filter.step(dt, [result.distance_m, result.lateral_m], [sigma ** 2, lateral_sigma ** 2],
                                            cfg.gate_sigma)
