@@ -40,8 +40,8 @@ import numpy as np
 
 from .io.bag import stamp_to_ns
 from .config import param
-from .docking.guidance import (GUIDANCE_STATES, LOST as GUIDANCE_LOST, NO_AIRCRAFT, OVERSHOOT, SLOW_DOWN, STOP,
-                               DockingGuidance, GuidanceConfig, GuidanceResult)
+from .docking.guidance import (GUIDANCE_STATES, LOST as GUIDANCE_LOST, NO_AIRCRAFT, OVERSHOOT, PARAM_PREFIX as
+                               GUIDANCE_PREFIX, SLOW_DOWN, STOP, DockingGuidance, GuidanceConfig, GuidanceResult)
 from .docking.tracker import LOST, STATE_NAMES, TRACKING, WAITING, DockingConfig, DockingResult, DockingTracker, state_row
 from .ros.node_base import PerceptionNode, run_node
 from .object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
@@ -323,9 +323,6 @@ class DockingProcessor(MessageProcessor):
                            "guidance frames measured at the nose wheel": self.guidance.gear_measured,
                            "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name})
         return values
-
-
-GUIDANCE_PREFIX = "guidance."
 
 
 def build(configs: dict) -> DockingProcessor:

@@ -35,12 +35,11 @@ from tqdm import tqdm
 
 from .config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from .io.bag import check_outputs
-from .docking.guidance import GuidanceConfig
+from .docking.guidance import PARAM_PREFIX as GUIDANCE_PREFIX, GuidanceConfig
 from .docking.tracker import LOST, TRACKING, DockingConfig, DockingTracker
 from .geometry import quad_to_box
 
 NODE_NAME = "docking_tracker"
-GUIDANCE_PREFIX = "guidance."
 VIDEO_SUFFIXES = (".avi", ".mp4", ".mkv", ".mov", ".webm", ".mpg", ".mpeg")
 
 

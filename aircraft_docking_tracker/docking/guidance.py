@@ -71,6 +71,10 @@ GUIDANCE_STATES = {NO_AIRCRAFT: "no aircraft", TRACKING: "tracking", SLOW_DOWN: 
 GUIDANCE_DTYPE = np.dtype([("distance_m", "<f4"), ("lateral_m", "<f4"), ("speed_mps", "<f4"), ("state", "<i4")])
 
 
+#: The guidance's parameters' prefix (``guidance.*``) in the node and the tools.
+PARAM_PREFIX = "guidance."
+
+
 @dataclass
 class GuidanceConfig:
     """Where the stand file is, which aircraft docks, and the guidance's constants."""
@@ -285,11 +289,19 @@ class ConstantVelocityFilter:
         self.x = self.x @ F.T
         self.P = F @ self.P @ F.T + q
 
-    def step(self, dt: float, z: np.ndarray, r: np.ndarray, gate: float = 0.0) -> tuple[np.ndarray, bool]:
+    def step(self, dt: float, z: np.ndarray, r: np.ndarray, gate: float = 0.0,
+             max_rate: float = np.inf) -> tuple[np.ndarray, bool]:
         """Predict over ``dt`` [s], update with measurements ``z`` of variances ``r``; (the filtered (value, rate),
         whether the measurement was taken). The first measurement sets the value (rate 0), the second the rate by
         difference (two-point start). Once ``GATE_AFTER`` are taken, with ``gate`` > 0, a measurement whose first
-        channel's innovation exceeds ``gate`` of its sigma is not taken: the prediction is returned."""
+        channel's innovation exceeds ``gate`` of its sigma is not taken: the prediction is returned. The rates are
+        held within ``max_rate``."""
+        x, taken = self._step(dt, z, r, gate)
+        self.x[:, 1] = np.clip(self.x[:, 1], -max_rate, max_rate)
+        x[:, 1] = self.x[:, 1]
+        return x, taken
+
+    def _step(self, dt: float, z, r, gate: float) -> tuple[np.ndarray, bool]:
         z, r = np.asarray(z, np.float64), np.asarray(r, np.float64)
         if self.seen == 0 or (self.seen == 1 and dt > 0):
             self.seen += 1
@@ -412,10 +424,8 @@ class DockingGuidance:
             self.restart()               # rejected for longer than gate_hold_s: the aircraft is where it is now
         self.last_stamp_ns = stamp_ns
         filtered, taken = self.filter.step(dt, [result.distance_m, result.lateral_m], [sigma ** 2, lateral_sigma ** 2],
-                                           cfg.gate_sigma)
-        self.filter.x[:, 1] = np.clip(self.filter.x[:, 1], -cfg.max_speed_mps, cfg.max_speed_mps)
-        (distance, _), (lateral, _) = filtered
-        rate = float(self.filter.x[0, 1])
+                                           cfg.gate_sigma, cfg.max_speed_mps)
+        (distance, rate), (lateral, _) = filtered
         if taken:
             self.last_taken_ns = stamp_ns
         else:

@@ -33,13 +33,12 @@ def write_docking_bag(scene: DockingScene, path: str | Path, progress: bool = Tr
     from aircraft_docking_tracker.docking.guidance import true_guidance  # noqa: PLC0415
 
     kept = []
+    guidance = true_guidance(*scene.guidance_truth().T)
     with BagWriter(path, overwrite=overwrite) as bag:
-        guidance = None
         for frame in tqdm(scene.frames(), total=scene.config.frames, desc=f"docking seed {scene.seed}",
                           disable=not progress, unit="frame"):
             hdr = m.header(frame.stamp_ns)
             if frame.index == 0:
-                guidance = true_guidance(*scene.guidance_truth().T)
                 bag.write(m.GT_STAND, m.string_msg(scene.stand_json()), frame.stamp_ns)
             bag.write(m.IMAGE, m.image_msg(frame.image, hdr), frame.stamp_ns)
             bag.write(m.GT_POLYGON, m.quad_to_polygon(frame.quad, hdr), frame.stamp_ns)
