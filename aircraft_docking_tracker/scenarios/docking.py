@@ -13,7 +13,9 @@ under ``A_t`` in the order TL, TR, BR, BL, is the affine quadrilateral the docki
 estimates (seed 000's state X is such a matrix), and the nose is ``A_t`` applied to the template's
 nose point. ``A_t`` comes from a pinhole camera: the nose's ground position along the lead-in
 line is projected to the image, the scale is focal / depth, the in-image rotation follows the
-heading's deviation from the final line.
+heading's deviation from the final line; the template's vertical is scaled so that the nose wheel's
+ground contact is drawn where the camera sees the nose's foot on the apron (exactly so on the final
+straight, where the heading's deviation is 0), so that the wheel's contact is as true as the nose.
 
 Ground frame: metres, origin at the stop position of the nose, +Y away from the camera along the
 final straight of the lead-in line, +X to the right as the camera sees it, Z up.
@@ -34,8 +36,11 @@ TEMPLATE_W, TEMPLATE_H = 400, 200          # template rectangle [template px]
 WINGSPAN_M = 36.0                         # template width in metres (A320-like)
 M_PER_TPL = WINGSPAN_M / TEMPLATE_W
 NOSE_TPL = np.array([200.0, 150.0])       # nose point in template pixels
-NOSE_HEIGHT_M = (196.0 - NOSE_TPL[1]) * M_PER_TPL   # wheels touch the ground at template y = 196
+GROUND_TPL_Y = 196.0                      # the wheels touch the ground at this template row
+NOSE_HEIGHT_M = (GROUND_TPL_Y - NOSE_TPL[1]) * M_PER_TPL
 SPRITE_SCALE = 2                          # the sprite is drawn at 2x the template resolution
+SUPERSAMPLE = 8                           # ... each of its pixels from 8 x 8 samples
+_SHIFT = 4                                # fractional bits of OpenCV's drawing coordinates
 
 
 @dataclass
@@ -127,24 +132,42 @@ def draw_aircraft(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     Fuselage (nose disc receding to the tail), swept wings with dihedral, two engines on pylons,
     horizontal stabilisers, tail fin, cockpit windows, landing gear; a livery colour on the fin,
     wing stripes and engine cowls; surface texture noise.
+
+    Every shape is drawn at ``SUPERSAMPLE`` times the sprite's resolution, from sub-pixel vertices, and
+    averaged down: an edge at template row ``y`` lands at ``y`` in the sprite's pixel-centre coordinates
+    (``cv2.warpAffine``'s) to within ``1 / (2 SUPERSAMPLE SPRITE_SCALE)`` template px. Drawn straight at
+    the sprite's resolution, OpenCV's fill covered the last row's pixel whole: the nose wheel's bottom,
+    where the guidance measures the aircraft's ground contact, lay a third of a template pixel low.
     """
-    k = SPRITE_SCALE
+    k = SPRITE_SCALE * SUPERSAMPLE
     h, w = TEMPLATE_H * k, TEMPLATE_W * k
     img = np.zeros((h, w, 3), np.uint8)
     alpha = np.zeros((h, w), np.uint8)
     livery = tuple(int(c) for c in rng.choice([[150, 40, 20], [30, 30, 170], [40, 120, 30], [20, 140, 220],
                                                  [120, 30, 110]]))
     white, grey, dark = (235, 235, 232), (170, 172, 175), (40, 40, 45)
+    frac = 1 << _SHIFT
+
+    def fixed(points):
+        """Template px -> fixed-point pixel-centre coordinates of the supersampled canvas (whose pixels
+        ``j S .. j S + S - 1`` average into the sprite's pixel ``j``)."""
+        return np.round((np.asarray(points, np.float64) * k + (SUPERSAMPLE - 1) / 2) * frac).astype(np.int32)
 
     def poly(points, color):
-        pts = (np.asarray(points, np.float64) * k).astype(np.int32)
-        cv2.fillPoly(img, [pts], color, cv2.LINE_AA)
-        cv2.fillPoly(alpha, [pts], 255, cv2.LINE_AA)
+        pts = fixed(points)
+        cv2.fillPoly(img, [pts], color, cv2.LINE_8, _SHIFT)
+        cv2.fillPoly(alpha, [pts], 255, cv2.LINE_8, _SHIFT)
 
     def disc(center, radius, color):
-        c = tuple(int(v * k) for v in center)
-        cv2.circle(img, c, int(radius * k), color, -1, cv2.LINE_AA)
-        cv2.circle(alpha, c, int(radius * k), 255, -1, cv2.LINE_AA)
+        c = tuple(int(v) for v in fixed([center])[0])
+        r = int(round(radius * k * frac))
+        cv2.circle(img, c, r, color, -1, cv2.LINE_8, _SHIFT)
+        cv2.circle(alpha, c, r, 255, -1, cv2.LINE_8, _SHIFT)
+
+    def line(a, b, width, color):
+        pa, pb = (tuple(int(v) for v in q) for q in fixed([a, b]))
+        cv2.line(img, pa, pb, color, int(width * k), cv2.LINE_8, _SHIFT)
+        cv2.line(alpha, pa, pb, 255, int(width * k), cv2.LINE_8, _SHIFT)
 
     # tail fin and horizontal stabilisers (far away, drawn first)
     poly([[195, 62], [205, 62], [204, 6], [198, 4]], livery)
@@ -156,10 +179,8 @@ def draw_aircraft(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     poly([[220, 142], [396, 112], [396, 106], [218, 132]], grey)
     poly([[60, 122], [4, 112], [4, 108], [60, 116]], livery)            # wing-tip stripes
     poly([[340, 122], [396, 112], [396, 108], [340, 116]], livery)
-    cv2.line(img, (4 * k, 106 * k), (4 * k, 96 * k), livery, 2 * k)      # winglets
-    cv2.line(alpha, (4 * k, 106 * k), (4 * k, 96 * k), 255, 2 * k)
-    cv2.line(img, (396 * k, 106 * k), (396 * k, 96 * k), livery, 2 * k)
-    cv2.line(alpha, (396 * k, 106 * k), (396 * k, 96 * k), 255, 2 * k)
+    line((4, 106), (4, 96), 2, livery)                                    # winglets
+    line((396, 106), (396, 96), 2, livery)
     # engines on pylons under the wings
     for ex in (120.0, 280.0):
         poly([[ex - 3, 140], [ex + 3, 140], [ex + 3, 128], [ex - 3, 128]], grey)
@@ -169,12 +190,16 @@ def draw_aircraft(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     # landing gear
     for gx, top in ((200.0, 168.0), (172.0, 150.0), (228.0, 150.0)):
         poly([[gx - 1.5, top], [gx + 1.5, top], [gx + 1.5, 190], [gx - 1.5, 190]], grey)
-        poly([[gx - 5, 186], [gx + 5, 186], [gx + 5, 196], [gx - 5, 196]], dark)
+        poly([[gx - 5, 186], [gx + 5, 186], [gx + 5, GROUND_TPL_Y], [gx - 5, GROUND_TPL_Y]], dark)
     # nose (the fuselage cross-section), cockpit windows, livery cheat line
     disc(NOSE_TPL, 24, white)
     poly([[184, 136], [216, 136], [213, 142], [187, 142]], dark)
     poly([[176, 150], [224, 150], [222, 156], [178, 156]], livery)
     disc((200, 150), 3, (120, 120, 125))
+    size = (TEMPLATE_W * SPRITE_SCALE, TEMPLATE_H * SPRITE_SCALE)
+    img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    alpha = cv2.resize(alpha, size, interpolation=cv2.INTER_AREA)
+    h, w = alpha.shape
     # texture: smooth shading noise on every surface
     shade = 0.85 + 0.3 * render.value_noise(rng, (h, w), scales=(32, 8), weights=(0.7, 0.3))
     img = np.clip(img.astype(np.float32) * shade[..., None], 0, 255).astype(np.uint8)
@@ -268,12 +293,17 @@ class DockingScene:
             offset = self.lateral_offset(s)
             x, y = x - offset * np.cos(psi), y + offset * np.sin(psi)
         nose3 = np.array([x, y, NOSE_HEIGHT_M])
-        nose_img = self.camera.project(nose3)[0]
+        nose_img, foot_img = self.camera.project([nose3, [x, y, 0.0]])
         scale = self.camera.f / float(self.camera.depth(nose3)[0]) * M_PER_TPL
         # yawed aircraft seen nose-on: the wing span looks shorter, and the image turns with the heading
         squeeze = 0.8 + 0.2 * np.cos(psi)
         c, sn = np.cos(psi), np.sin(psi)
-        linear = scale * np.array([[c, -sn], [sn, c]]) @ np.diag([squeeze, 1.0])
+        across, down = np.array([c, sn]), np.array([-sn, c])
+        # the template's vertical is scaled so that the nose wheel's ground contact lies as far below the nose as
+        # the camera sees the nose's foot on the apron (at the nose's depth alone it fell 0.2-0.4 px low, 0.1-0.3 m
+        # of range); turned with the heading, it lands there when the heading's deviation is 0
+        down_scale = float(np.linalg.norm(foot_img - nose_img)) / (GROUND_TPL_Y - NOSE_TPL[1])
+        linear = np.column_stack([scale * squeeze * across, down_scale * down])
         affine = np.eye(3)
         affine[:2, :2] = linear
         affine[:2, 2] = nose_img - linear @ NOSE_TPL
