@@ -12,7 +12,9 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
      |∂Z_g/∂v| δv ~ Z² δv / (f Δh), and at a low camera (small Δh) a pixel is metres;
    * *apparent size*: the weak-perspective scale of the tracked template, Z_s = f H / h, with H the
      type's template height (ground to fin top: a turn does not shorten it, as it does the span) and h
-     the quadrilateral's vertical sides in pixels. Its error grows only linearly: δZ_s = Z δh / h.
+     the quadrilateral's vertical sides in pixels, times the shortening of a vertical at the nose that the
+     calibrated camera predicts (a camera looking down sees verticals short: 1 % at 5 degrees). Its error
+     grows only linearly: δZ_s = Z δh / h.
    They disagree in opposite ways at distance -- the ground plane's error explodes, the size's stays
    a fixed fraction -- so they are **fused by inverse variance** on the depth, with σ_g = |∂Z_g/∂v|
    ``pixel_sigma`` and σ_s = Z_s ``size_sigma``: far away the size decides, close to a high camera the
@@ -224,10 +226,25 @@ def fuse_depths(depths, sigmas) -> tuple[float, float]:
     return float(np.dot(weights, depths[ok]) / weights.sum()), float(1.0 / np.sqrt(weights.sum()))
 
 
+def vertical_per_metre(stand: StandCalibration, point: np.ndarray) -> np.ndarray:
+    """The image vector [px per metre] of the apron's vertical at the stand ``point`` [m], downwards: its drop to the
+    apron over its height (1 m down if it is on the apron or below)."""
+    height = float(point[2]) if point[2] > 0 else 1.0
+    return np.diff(stand.camera.project([point, point - (0.0, 0.0, height)]), axis=0)[0] / height
+
+
 def size_depth(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray) -> float:
-    """The nose's optical-axis depth from the template's apparent height, Z_s = f H / h (step 2) [m]."""
+    """The nose's optical-axis depth from the template's apparent height (step 2) [m]: Z_s = f H / h, then
+    times the shortening of the vertical below the nose that the calibrated camera predicts (its pixels per
+    metre over f / Z_s; one step: it changes slowly with the depth). A camera looking down 5 degrees sees it
+    about 1 % short, which f H / h alone reads as 1 % further."""
     extent = vertical_extent(quad)
-    return stand.camera.focal_px * aircraft.height_m / extent if extent > 0 else float("nan")
+    if not extent > 0:
+        return float("nan")
+    depth = stand.camera.focal_px * aircraft.height_m / extent
+    nose = stand.camera.point_at_depth(template_point(quad, aircraft.nose_in_template), depth)[0]
+    shortening = float(np.linalg.norm(vertical_per_metre(stand, nose))) * depth / stand.camera.focal_px
+    return depth * shortening if np.isfinite(shortening) and shortening > 0 else depth
 
 
 def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, pixel_sigma: float,
@@ -379,7 +396,7 @@ class DockingGuidance:
         if not np.isfinite(depth):
             return None
         nose = camera.point_at_depth(template_point(quad, self.aircraft.nose_in_template), depth)[0]
-        down = np.diff(camera.project([nose, nose - (0.0, 0.0, 1.0)]), axis=0)[0]
+        down = vertical_per_metre(self.stand, nose)
         return down if np.isfinite(down).all() and np.linalg.norm(down) > 0 else None
 
     def measure(self, quad: np.ndarray, gear: np.ndarray | None = None) -> tuple[GuidanceResult, float, float]:
