@@ -321,6 +321,8 @@ class DockingProcessor(MessageProcessor):
                            "guidance smoothing restarts": self.guidance.restarts,
                            "guidance jumps rejected": self.guidance.rejected,
                            "guidance frames measured at the nose wheel": self.guidance.gear_measured,
+                           "guidance nose-wheel contacts refused (far from the size's range)":
+                               self.guidance.gear_refused,
                            "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name})
         return values
 

@@ -253,6 +253,33 @@ def test_nose_gear_setback_puts_the_nose_ahead_of_the_wheel(scene, frames):
     assert ahead.distance_m == pytest.approx(truth[0] - 2.0, abs=0.15)
 
 
+def test_a_contact_far_from_the_size_range_is_refused(scene, frames):
+    """A tyre-to-apron step found on the apron 25 px above the wheel lies tens of metres from the size's range
+    (about 6 sigmas of it 25 m out): with ``gear_agree_sigma`` it is refused and counted, and the figures fall
+    back on the quadrilateral; the true contact is taken even under a quadrilateral 10 % too large."""
+    stand = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
+    i = int(np.argmin([abs(truth[0] - 25.0) for _, truth, _, _ in frames]))
+    quad, truth, _, nose_ground = frames[i]
+    contact = stand.camera.project([[*nose_ground, 0.0]])[0]
+    gear = np.full(1, np.nan, NOSE_GEAR_DTYPE)
+    gear["axis_x"], gear["axis_y"] = contact
+    gear["ground_x"], gear["ground_y"] = contact
+    on_apron = gear.copy()
+    on_apron["ground_y"] -= 25.0
+    agree = DockingGuidance(stand, GuidanceConfig(gear_agree_sigma=4.0))
+    taken = agree.measure(quad, gear)[0]
+    assert taken.gear_measured and not taken.gear_refused and taken.distance_m == pytest.approx(truth[0], abs=0.3)
+    large = quad.mean(axis=0) + (quad - quad.mean(axis=0)) * 1.1
+    assert agree.measure(large, gear)[0].gear_measured
+    refused = agree.measure(quad, on_apron)[0]
+    assert refused.gear_refused and not refused.gear_measured
+    assert refused.distance_m == pytest.approx(truth[0], abs=3.0)        # the quadrilateral's figure
+    blind = DockingGuidance(stand).measure(quad, on_apron)[0]            # 0: every contact taken
+    assert blind.gear_measured and blind.distance_m - truth[0] > 20.0
+    agree.update(quad, True, False, 0, on_apron)
+    assert agree.gear_refused == 1 and agree.gear_measured == 0
+
+
 def test_gate_rejects_a_jump_and_restarts_after_a_gap(scene, frames):
     """A quadrilateral that jumps to the stop mark mid-approach is rejected and counted; the figure holds the
     prediction. Rejected for longer than gate_hold_s, the smoothing takes the new figures."""

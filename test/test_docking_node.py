@@ -254,6 +254,7 @@ def test_guidance_measures_the_nose_wheel_near_the_stop(tmp_path):
         out = dict(process_guarded(proc, "image", numpy_to_image(frame.image, "bgr8", header(k)), stats))
         errors.append(cloud_to_table(out["docking/guidance"], GUIDANCE_DTYPE)["distance_m"][0] - frame.guidance[0])
     assert proc.status()["guidance frames measured at the nose wheel"] >= len(frames) - 2
+    assert proc.status()["guidance nose-wheel contacts refused (far from the size's range)"] == 0
     assert np.nanmax(np.abs(errors[2:])) < 1.0
 
 

@@ -25,7 +25,10 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    pixel: its ground-plane depth is on the apron (z = 0, the camera's whole height above it), with
    ``gear_pixel_sigma``, fused with the size's as above, and the nose is the type's
    ``nose_gear_setback_m`` ahead of the contact along the line. The quadrilateral's sideways and size
-   errors (tens of pixels, a few percent, late in an approach) then no longer reach the figures.
+   errors (tens of pixels, a few percent, late in an approach) then no longer reach the figures. The two
+   depths are independent, so they check each other: with ``gear_agree_sigma``, a contact whose depth lies
+   further than that many sigmas from the size's (a tyre-like step on the apron, found under a quadrilateral
+   that has slipped) is refused and counted, and the quadrilateral's figure is used.
 3. **On the apron**: the fused nose point, projected on the lead-in line (a polyline, entry first):
    ``distance_m`` = arc length from the nose's foot to the stop mark's foot (positive before the
    mark, negative past it); ``lateral_m`` = signed offset from the line, **positive when the nose is
@@ -131,6 +134,9 @@ class GuidanceConfig:
     gear_min_symmetry: float = param(0.5, "the mirror correlation a symmetry axis needs", low=-1.0, high=1.0)
     gear_min_contrast: float = param(12.0, "the step from tyre to apron a ground contact needs [grey levels]",
                                      low=0.0, high=255.0)
+    gear_agree_sigma: float = param(0.0, "a measured ground contact whose range lies further than this many sigmas "
+                                    "from the apparent size's is not taken for the nose wheel (a step on the apron "
+                                    "is); 0: every contact is taken", low=0.0, high=1000.0)
 
     def validate(self) -> None:
         """A stand file that exists and passes every check, holding ``aircraft_type`` (the one validation every
@@ -156,6 +162,7 @@ class GuidanceResult:
     depth_ground_m: float = float("nan")          # optical-axis depth of the nose from the ground plane
     depth_size_m: float = float("nan")            # ... and from the apparent size
     gear_measured: bool = False                   # the nose wheel's ground contact was measured
+    gear_refused: bool = False                    # ... and refused: its range disagreed with the size's
     measurement_taken: bool = True                # False: the gate rejected this frame's measurement
 
     def row(self) -> np.ndarray:
@@ -247,6 +254,28 @@ def size_depth(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray
     return depth * shortening if np.isfinite(shortening) and shortening > 0 else depth
 
 
+def contact_depths(stand: StandCalibration, aircraft: AircraftType, depth_size: float, contact: np.ndarray,
+                   size_sigma: float, gear_pixel_sigma: float) -> tuple[list[float], list[float]]:
+    """The nose wheel's depth two ways, with their sigmas (step 2b): from the apparent size (the nose's, plus the
+    wheel's setback: it stands that much further from a camera it faces) and from its ground contact on the apron
+    (``gear_pixel_sigma`` pixels of the contact's row, in metres there)."""
+    depth_ground, depth_below = stand.camera.depth_on_plane([contact, contact + (0.0, 1.0)], 0.0)
+    return ([depth_size + aircraft.nose_gear_setback_m, float(depth_ground)],
+            [depth_size * size_sigma, abs(depth_ground - depth_below) * gear_pixel_sigma])
+
+
+def contact_disagreement(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, gear: np.ndarray,
+                         size_sigma: float, gear_pixel_sigma: float) -> float:
+    """How many sigmas apart the two independent depths of :func:`contact_depths` are (NaN if either is missing:
+    :meth:`DockingGuidance.measure` then refuses the contact).
+    A contact on the nose wheel agrees with the size to a few of the size's 10 %; a tyre-to-apron step found on
+    the apron below a quadrilateral that has slipped lies tens of metres off."""
+    contact = np.array([float(gear["ground_x"][0]), float(gear["ground_y"][0])])
+    (a, b), (sa, sb) = contact_depths(stand, aircraft, size_depth(stand, aircraft, quad), contact, size_sigma,
+                                      gear_pixel_sigma)
+    return abs(a - b) / float(np.hypot(sa, sb))
+
+
 def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, pixel_sigma: float,
                 size_sigma: float, gear: np.ndarray | None = None,
                 gear_pixel_sigma: float = GuidanceConfig.gear_pixel_sigma
@@ -260,10 +289,9 @@ def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarra
     depth_size = size_depth(stand, aircraft, quad)
     if gear is not None and np.isfinite(gear["ground_y"]).all():
         contact = np.array([float(gear["ground_x"][0]), float(gear["ground_y"][0])])
-        depth_ground, depth_below = camera.depth_on_plane([contact, contact + (0.0, 1.0)], 0.0)
-        # the size gives the nose's depth; the wheel stands about setback further from a camera it faces
-        depth, sigma = fuse_depths([depth_size + aircraft.nose_gear_setback_m, depth_ground],
-                                   [depth_size * size_sigma, abs(depth_ground - depth_below) * gear_pixel_sigma])
+        depths, sigmas = contact_depths(stand, aircraft, depth_size, contact, size_sigma, gear_pixel_sigma)
+        depth, sigma = fuse_depths(depths, sigmas)
+        depth_ground = depths[1]
         if not np.isfinite(depth):
             return contact, np.full(3, np.nan), float(depth_ground), float(depth_size), sigma
         foot = camera.point_at_depth(contact, depth)[0][:2]
@@ -357,6 +385,7 @@ class DockingGuidance:
         self.restarts = 0                 # smoothing restarted by a time jump
         self.rejected = 0                 # measurements the gate rejected
         self.gear_measured = 0            # frames measured at the nose wheel
+        self.gear_refused = 0             # contacts refused: their range disagreed with the size's
         self.last_taken_ns: int | None = None
         self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
         self.slow_since_ns: int | None = None   # when slow down (or nearer) was first shown, continuously
@@ -403,11 +432,14 @@ class DockingGuidance:
         """One frame's unsmoothed guidance figures, the fused depth's sigma and the lateral offset's [m]."""
         cfg = self.config
         measured = gear is not None and bool(np.isfinite(gear["ground_y"]).all())
+        refused = measured and cfg.gear_agree_sigma > 0 and not contact_disagreement(
+            self.stand, self.aircraft, quad, gear, cfg.size_sigma, cfg.gear_pixel_sigma) <= cfg.gear_agree_sigma
+        measured = measured and not refused
         nose, point, depth_ground, depth_size, sigma = locate_nose(self.stand, self.aircraft, quad, cfg.pixel_sigma,
                                                                    cfg.size_sigma, gear if measured else None,
                                                                    cfg.gear_pixel_sigma)
         result = GuidanceResult(TRACKING, nose_px=nose, nose_stand=point, depth_ground_m=depth_ground,
-                                depth_size_m=depth_size, gear_measured=measured)
+                                depth_size_m=depth_size, gear_measured=measured, gear_refused=refused)
         lateral_sigma = float("nan")
         if np.isfinite(point).all():
             arc, result.lateral_m = along_line(self.stand.lead_in, point)
@@ -433,6 +465,7 @@ class DockingGuidance:
             self.reset()
             return GuidanceResult(LOST, nose_px=result.nose_px)
         self.gear_measured += result.gear_measured
+        self.gear_refused += result.gear_refused
         dt = (stamp_ns - self.last_stamp_ns) * 1e-9 if self.last_stamp_ns is not None else 0.0
         if self.last_stamp_ns is not None and not (0.0 < dt <= cfg.max_gap_s):
             self.restarts += 1
