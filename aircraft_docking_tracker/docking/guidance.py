@@ -93,14 +93,16 @@ class GuidanceConfig:
     size_sigma: float = param(0.1, "the tracked template's relative size error [1 sigma] (apparent-size range's "
                               "weight; tracked quadrilaterals are a few percent off late in an approach, tens in the "
                               "worst runs)", low=1e-4, high=1.0)
-    accel_sigma: float = param(8.0, "white-noise acceleration of the smoothing filter [m/s^2] (how closely it follows "
+    accel_sigma: float = param(4.0, "white-noise acceleration of the smoothing filter [m/s^2] (how closely it follows "
                                "the figures: the nose wheel's are good to a pixel, and a filter that lags shows STOP "
                                "late or a false overshoot)", low=1e-3, high=100.0)
     max_gap_s: float = param(1.0, "a gap between frames longer than this [s] (or a stamp going back) restarts "
                              "the smoothing", low=0.0, high=3600.0)
     slow_down_m: float = param(15.0, "slow down shown within this distance of the stop mark [m]", low=0.0,
                                high=1000.0)
-    stop_m: float = param(0.0, "STOP shown once the distance to go is at or below this [m]", low=-10.0, high=10.0)
+    stop_m: float = param(0.25, "STOP shown once the distance to go is at or below this [m] (inside the +-0.5 m an "
+                          "advanced VDGS stops to: a figure a tenth of a metre long at the mark still shows STOP)",
+                          low=-10.0, high=10.0)
     stop_release_m: float = param(0.5, "STOP, once shown, holds until the distance is this much above stop_m [m]",
                                   low=0.0, high=100.0)
     overshoot_m: float = param(0.5, "overshoot shown when the nose is more than this past the mark [m]", low=0.0,
