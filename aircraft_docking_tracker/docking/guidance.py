@@ -93,7 +93,7 @@ class GuidanceConfig:
     size_sigma: float = param(0.1, "the tracked template's relative size error [1 sigma] (apparent-size range's "
                               "weight; tracked quadrilaterals are a few percent off late in an approach, tens in the "
                               "worst runs)", low=1e-4, high=1.0)
-    accel_sigma: float = param(4.0, "white-noise acceleration of the smoothing filter [m/s^2] (how closely it follows "
+    accel_sigma: float = param(8.0, "white-noise acceleration of the smoothing filter [m/s^2] (how closely it follows "
                                "the figures: the nose wheel's are good to a pixel, and a filter that lags shows STOP "
                                "late or a false overshoot)", low=1e-3, high=100.0)
     max_gap_s: float = param(1.0, "a gap between frames longer than this [s] (or a stamp going back) restarts "
