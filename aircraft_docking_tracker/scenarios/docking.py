@@ -23,7 +23,7 @@ final straight of the lead-in line, +X to the right as the camera sees it, Z up.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterator
 
 import cv2
