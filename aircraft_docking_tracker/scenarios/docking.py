@@ -135,7 +135,8 @@ def draw_aircraft(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
 
     Every shape is drawn at ``SUPERSAMPLE`` times the sprite's resolution, from sub-pixel vertices, and
     averaged down: an edge at template row ``y`` lands at ``y`` in the sprite's pixel-centre coordinates
-    (``cv2.warpAffine``'s) to within ``1 / (2 SUPERSAMPLE SPRITE_SCALE)`` template px. Drawn straight at
+    (``cv2.warpAffine``'s) to within ``1 / (SUPERSAMPLE SPRITE_SCALE)`` template px (OpenCV's fill takes in one
+    more row of the fine canvas at a bottom edge: the nose wheel's bottom lands at 196.06). Drawn straight at
     the sprite's resolution, OpenCV's fill covered the last row's pixel whole: the nose wheel's bottom,
     where the guidance measures the aircraft's ground contact, lay a third of a template pixel low.
     """
