@@ -119,7 +119,7 @@ NEVER_LOST = 10000
 def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
     """Camera host plays, compute host runs detector -> association and the docking tracker (image
     subscriptions made reliable by the QoS override), recording host records: no frame is lost between
-    hosts, and the outputs equal run_offline's frame for frame."""
+    hosts, and the outputs equal run_offline's frame for frame (the quadrilaterals to float32 rounding)."""
     bag = docking_bag(tmp_path / "docking.mcap", frames=40)
     box = first_polygon_box(bag)
     recording = tmp_path / "rec"
@@ -174,9 +174,13 @@ def test_three_hosts_equal_the_single_host_offline_run(hosts, tmp_path):
                                     **alone)
     live_quads = _messages(recording, f"/{CAM}/docking/polygon")
     assert len(live_quads) == len(offline_quads)
+    # the same frames through the same core in two processes: equal to float32 rounding (a last-bit difference
+    # of 1.5e-5 px was seen on one coordinate of one frame: numpy's vectorised sums may add in another order when an
+    # array sits at another memory alignment), so to a thousandth of a pixel
     for (_, a), (_, b) in zip(live_quads, offline_quads):
         assert a.header.stamp == b.header.stamp
-        np.testing.assert_array_equal([(p.x, p.y) for p in a.polygon.points], [(p.x, p.y) for p in b.polygon.points])
+        np.testing.assert_allclose([(p.x, p.y) for p in a.polygon.points], [(p.x, p.y) for p in b.polygon.points],
+                                   rtol=0, atol=1e-3)
     offline_tracks = offline_outputs("detections", ["detector", "association"], "tracks")
     live_tracks = _messages(recording, f"/{CAM}/tracks")
     assert len(live_tracks) == len(offline_tracks)
