@@ -32,6 +32,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import functools  # noqa: E402
 import itertools  # noqa: E402
 import json  # noqa: E402
 import multiprocessing  # noqa: E402
@@ -174,13 +175,15 @@ def score(approach: dict, guided: dict) -> dict:
     e = guidance_errors(guided["rows"], true_guidance(*approach["truth"].T), NEAR_M)
     near = approach["truth"][:, 0] <= NEAR_M
     drawn = np.abs(guided["rows"]["distance_m"][near] - approach["drawn"][near])
-    return {"distance_p95_drawn": float(np.percentile(drawn, 95)) if np.isfinite(drawn).all() else float("inf"),"lateral_p50": e["lateral_near_median"], "lateral_p95": e["lateral_near_p95"],
+    return {"distance_p95_drawn": float(np.percentile(drawn, 95)) if np.isfinite(drawn).all() else float("inf"),
+            "lateral_p50": e["lateral_near_median"], "lateral_p95": e["lateral_near_p95"],
             "distance_p50": e["distance_near_median"], "distance_p95": e["distance_near_p95"],
             "stop_at_m": e["stop_at_m"], "stop_ok": e["stop_within"], "stop_early": e["stop_early"],
             "stop_missed": e["stop_missed"], "state_accuracy": e["state_accuracy"], "speed_p50": e["speed_near_median"],
             "ms_per_frame": guided["seconds"] * 1e3}
 
 
+@functools.lru_cache(maxsize=1)
 def drawn_contact_row() -> float:
     """Where the synthetic scene draws the nose wheel's bottom, in template pixels: the 50 % row of the sprite's
     alpha down the axis (196.06 since session 28's supersampled sprite; 196.32 before, OpenCV filling the last
