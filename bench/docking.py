@@ -206,6 +206,7 @@ ABLATIONS = {   # label -> overrides of the defaults (one choice of issue 11 und
     "ISPF, start silhouette's axis on the grey level (start_axis mask)": {"start_axis": "mask"},
     "ISPF, no detector override": {"override_after": 0},
     "ISPF, override at IoU < 0.5": {"override_iou": 0.5},
+    "ISPF, override also on a track the silhouette vouches for (override_vouched false)": {"override_vouched": False},
     "ISPF, absolute update floor only (update_relative 0)": {"update_relative": 0.0},
     "ISPF, a restart's box held to the usual extent bound (restart_extent_low 0.6)": {"restart_extent_low": 0.6},
     "ISPF, a restart's box kept from growing past the usual bound (restart_extent_high 1.5)":
