@@ -321,3 +321,28 @@ def test_stop_stays_on_when_the_track_breaks_up_at_the_mark(scene, frames):
     assert guidance.rejected >= 10 and set(states) == {STOP}
     assert guidance.update(broken, False, True, stamp + 41 * NS // 14).state == LOST
     assert guidance.update(broken, True, False, stamp + 42 * NS // 14).state != STOP
+
+
+def test_no_stop_for_a_figure_that_comes_back_through_the_mark(scene, frames):
+    """recede_mps: a followed approach shows STOP at the mark; a figure that then runs on past it (overshoot) and
+    comes back through the mark at several m/s (a track that jumped onto something else: fresh approach 1009 showed
+    STOP 108 m early so) does not show STOP on the way back, slow down stands for it; with the rule off
+    (recede_mps 1000) it does. The quadrilaterals are exact and their size trusted to 1 %, as in the test above."""
+    def run(**cfg):
+        guidance = DockingGuidance(parse_stand(scene.stand_calibration()), GuidanceConfig(size_sigma=0.01, **cfg))
+        for quad, _, stamp, _ in frames:
+            state = guidance.update(quad, True, False, stamp).state
+        assert state == STOP
+        quad, _, stamp, _ = frames[-1]
+        centre, spread = quad.mean(axis=0), quad - quad.mean(axis=0)
+        scales = np.r_[np.linspace(1.0, 1.25, 30), np.linspace(1.25, 0.85, 30)]   # on past the mark, then back
+        results = [guidance.update(centre + spread * k, True, False, stamp + (i + 1) * NS // 14)
+                   for i, k in enumerate(scales)]
+        back = [r for r in results[30:] if r.distance_m > -0.5]
+        return [r.state for r in results], back
+
+    states, back = run()
+    assert OVERSHOOT in states[:30] and back and min(r.speed_mps for r in back) < -2.0
+    assert STOP not in [r.state for r in back] and SLOW_DOWN in [r.state for r in back]
+    states, back = run(recede_mps=1000.0)
+    assert STOP in [r.state for r in back]
