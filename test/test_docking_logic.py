@@ -359,7 +359,8 @@ def test_a_track_the_static_camera_vouches_for_is_not_overridden_by_a_box_of_its
         tracker = DockingTracker(DockingConfig(**{"override_after": 3, "seed": 0, **cfg}))
         tracker.start(frame, track)
         steps = iter(range(1, 100))
-        tracker.filter.step = lambda f: FrameResult(track, 0.9, 20, False, track[None], on_target=vouched_on(next(steps)))
+        tracker.filter.step = lambda f: FrameResult(track, 0.9, 20, False, track[None],
+                                                    on_target=vouched_on(next(steps)))
         return [i for i in range(1, 9) if tracker.step(frame, part).started]
 
     assert restarts(lambda i: False) == [3]                  # never vouched: the part's box is the aircraft elsewhere

@@ -210,14 +210,17 @@ def test_an_aircraft_behind_a_wall_is_not_re_fitted_to_the_piece_in_view():
 def test_a_track_that_started_on_a_hidden_aircraft_takes_the_detection_sooner():
     """override_after_hidden: after a start re-fit that found the aircraft hidden (the track holds the wall), the
     first detection away from the track restarts it there; a track whose start showed the aircraft waits
-    override_after (5) frames at the same place, and override_after_hidden 0 makes the hidden track wait as long."""
+    override_after (5) frames at the same place, and override_after_hidden 0 makes the hidden track wait as long.
+    The counts alone: override_vouched off (on, the track on the aircraft in view is vouched for by the static
+    camera and that detection never restarts it; the hidden one is not, and restarts at once as before)."""
     from aircraft_docking_tracker.object_table import DETECTION_DTYPE  # noqa: PLC0415
 
     away = np.array([(20, 150, 60, 40, 0.9, 1)], dtype=DETECTION_DTYPE)     # below the track, on the wall
 
     def restarts(hidden, **cfg):
         frames, box = aircraft_frames(30.0, np.random.default_rng(0), n=14, hidden=hidden)
-        tracker = DockingTracker(DockingConfig(**{"seed": 0, "override_moving": 0.0, **cfg}))
+        tracker = DockingTracker(DockingConfig(**{"seed": 0, "override_moving": 0.0, "override_vouched": False,
+                                                  **cfg}))
         tracker.start(frames[0], ag.to_box(box))
         results = [tracker.step(frame, away if i > 6 else None) for i, frame in enumerate(frames[1:], 1)]
         return [i for i, r in enumerate(results, 1) if r.started], results
@@ -227,6 +230,7 @@ def test_a_track_that_started_on_a_hidden_aircraft_takes_the_detection_sooner():
     np.testing.assert_allclose(results[6].box, [20, 150, 60, 40])
     assert restarts(False)[0] == [11]                  # the aircraft in view at the start: override_after 5
     assert restarts(True, override_after_hidden=0)[0] == [11]
+    assert restarts(True, override_vouched=True)[0] == [7] and restarts(False, override_vouched=True)[0] == []
 
 
 def test_colour_serves_only_the_start_silhouette():
