@@ -48,7 +48,8 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    again), 4 overshoot (more than ``overshoot_m`` past the mark), 5 lost (the tracker lost the aircraft:
    no figure is shown, and the filter starts afresh on the next track). STOP and overshoot need an
    approach: since the filter (re)started it must have followed the nose ``approach_m`` towards the
-   mark, and the figure must not be receding faster than ``recede_mps``, else slow down is shown in their place -- a track that starts on, or restarts onto, something
+   mark, and the figure must not be receding faster than ``recede_mps`` (an aircraft at its mark does not back
+   away), else slow down is shown in their place -- a track that starts on, or restarts onto, something
    standing near the mark (a vehicle, the jet bridge) shows no STOP; slow down must have been shown for
    ``slow_down_min_s`` first, continuously (a tracker that slips between the aircraft and the clutter makes
    the figure jump across the zone in a frame); and STOP and overshoot come on only on a frame whose

@@ -143,9 +143,10 @@ class DockingConfig(FilterConfig):
                                    "its place and size (the extent correction measured it) resets the override's count, "
                                    "as a row on the track does: the track is on the moving aircraft. Session 29, "
                                    "600-frame approaches 100-119 and 400-419, 3 tracker seeds: in a low sun the cascade "
-                                   "boxed a wing and engine beside a vouched track at IoU 0.86 and the override moved the "
-                                   "track there (402, every seed: IoU 0.11 to the stop; with the rule 0.76-0.80); "
-                                   "restarts of tracks never vouched are kept (410: 0.01 -> 0.77)")
+                                   "boxed a wing and engine of the aircraft under a vouched track (IoU 0.86 with the "
+                                   "truth) and the override moved the track onto that box (402, every seed: IoU 0.11 "
+                                   "to the stop; with the rule 0.76-0.80); restarts of tracks never vouched are kept "
+                                   "(410: 0.01 -> 0.77)")
     override_iou: float = param(0.3, "a detection overlapping the track's box by less than this IoU is away from "
                                 "it", low=0.0, high=1.0)
     override_iou_agreeing: float = param(0.3, "a detection that agrees with the track on the centre (each box "
