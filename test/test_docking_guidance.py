@@ -346,3 +346,30 @@ def test_no_stop_for_a_figure_that_comes_back_through_the_mark(scene, frames):
     assert STOP not in [r.state for r in back] and SLOW_DOWN in [r.state for r in back]
     states, back = run(recede_mps=1000.0)
     assert STOP in [r.state for r in back]
+
+
+def test_an_aircraft_standing_at_its_mark_behind_a_long_figure_is_shown_stop(scene, frames):
+    """halted_stop_m: a stand whose survey reads the last metres long -- here its stop mark moved on along the line,
+    so that the aircraft stands ``long_m`` short of it (fresh approaches 1012 and 1018 read 0.3-0.45 m long from
+    half-pixel clicks) -- shows STOP once the aircraft has stood still for halted_s, and not before it stands; with
+    the rule off it never does, nor does a figure further from the mark than halted_stop_m."""
+    stands = (truth[2] == 0.0 for _, truth, _, _ in frames)
+    standing_from = next(i for i, still in enumerate(stands) if still)
+    fps = int(scene.config.fps)
+
+    def first_stop(long_m, **cfg):
+        stand = scene.stand_calibration(click_sigma_px=0.0)
+        stand["aircraft"]["synthetic_a320"]["stop_m"] = [0.0, -long_m]      # the line runs on towards -y
+        guidance = DockingGuidance(parse_stand(stand), GuidanceConfig(size_sigma=0.01, **cfg))
+        states = [guidance.update(quad, True, False, stamp) for quad, _, stamp, _ in frames]
+        assert abs(states[-1].distance_m - long_m) < 0.1                    # the figure at the stand reads long
+        return next((i for i, r in enumerate(states) if r.state == STOP), None)
+
+    assert first_stop(0.0) < standing_from                                  # a true figure: STOP while it closes
+    for long_m in (0.35, 0.45):
+        first = first_stop(long_m)
+        assert first is not None and first <= standing_from + fps * 2.0
+        assert abs(frames[first][1][0]) < 0.05 and abs(frames[first - fps][1][0] - frames[first][1][0]) < 0.1
+    assert first_stop(0.35, halted_stop_m=0.0) is None
+    assert first_stop(0.8) is None
+

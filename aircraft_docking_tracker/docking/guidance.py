@@ -53,12 +53,16 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    standing near the mark (a vehicle, the jet bridge) shows no STOP; slow down must have been shown for
    ``slow_down_min_s`` first, continuously (a tracker that slips between the aircraft and the clutter makes
    the figure jump across the zone in a frame); and STOP and overshoot come on only on a frame whose
-   measurement was taken, never while the gate holds the prediction. STOP, once shown, is cleared only by a
+   measurement was taken, never while the gate holds the prediction. An aircraft **standing still** (its smoothed
+   figure moving less than ``halted_mps`` on average over ``halted_s``) within ``halted_stop_m`` of the mark is shown
+   STOP too, with the same guards: a stand whose survey reads its last metres long would otherwise leave an aircraft
+   at its mark on slow down. STOP, once shown, is cleared only by a
    measurement of a followed approach (or by the tracker losing the aircraft): a smoothing that restarted
    at the mark -- a tracker that breaks up once the aircraft has stood there -- keeps it on.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -130,6 +134,16 @@ class GuidanceConfig:
                               "Of the 240 guidance bench runs (tuning, held out, two fresh sets) 0.5, 1 and 2 change "
                               "the same two: that one, and a tuning STOP first shown at 0.07 m, now at 0.0 m; "
                               "1000: off", low=0.0, high=1000.0)
+    halted_stop_m: float = param(0.5, "STOP is also shown for an aircraft standing still within this of the mark [m] "
+                                 "(the +-0.5 m an advanced VDGS stops to): a stand surveyed to half a pixel can read "
+                                 "its last metres a few tenths long, and an aircraft stood at its mark without STOP "
+                                 "(8 of the 240 guidance bench runs, 0.3-0.45 m long: fresh approaches 1012 and "
+                                 "1018, held-out 217); at or below stop_m: off", low=0.0, high=10.0)
+    halted_mps: float = param(0.1, "standing still: the smoothed figure moved less than this on average over the last "
+                              "halted_s, every frame measured [m/s] (the smoothing's rate alone swings by tenths at a "
+                              "standstill); 0.1 to 0.2 change the same runs", low=0.0, high=10.0)
+    halted_s: float = param(1.0, "standing still: over this long [s] (1 and 2 change the same runs)", low=0.01,
+                            high=60.0)
     gear_pixel_sigma: float = param(0.25, "the nose wheel's measured ground contact's error [px, 1 sigma] (its "
                                     "range's weight)", low=0.01, high=1000.0)
     gear_min_height_px: float = param(80.0, "measure the nose wheel's ground contact once the tracked template "
@@ -399,6 +413,7 @@ class DockingGuidance:
         self.last_taken_ns: int | None = None
         self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
         self.slow_since_ns: int | None = None   # when slow down (or nearer) was first shown, continuously
+        self.recent: deque = deque()      # (stamp, smoothed distance) of the measured frames of the last halted_s
 
     def reset(self) -> None:
         self.restart()
@@ -410,6 +425,7 @@ class DockingGuidance:
         self.filter.reset()
         self.farthest_m = float("nan")
         self.slow_since_ns = None
+        self.recent.clear()
 
     def configure(self, config: GuidanceConfig) -> None:
         """New constants (the stand and the aircraft type stay as they were built)."""
@@ -494,19 +510,35 @@ class DockingGuidance:
         result.distance_m, result.lateral_m, result.speed_mps = float(distance), float(lateral), float(-rate)
         if taken:
             self.farthest_m = float(np.fmax(self.farthest_m, distance))
+        halted = self.standing_still(stamp_ns, result.distance_m if taken else None)
         # STOP and overshoot come on with a measurement, never with a prediction alone, after an approach followed
         # and slow down shown long enough; STOP shown stays on until a measurement of a followed approach clears it
         in_zone_s = (stamp_ns - self.slow_since_ns) * 1e-9 if self.slow_since_ns is not None else 0.0
         followed = (taken and self.farthest_m - result.distance_m >= cfg.approach_m
                     and result.speed_mps >= -cfg.recede_mps)
         result.state = STOP if self.showing_stop and not followed else display_state(
-            result.distance_m, self.showing_stop, cfg, followed and in_zone_s >= cfg.slow_down_min_s)
+            result.distance_m, self.showing_stop, cfg, followed and in_zone_s >= cfg.slow_down_min_s, halted)
         if result.state == TRACKING:
             self.slow_since_ns = None
         elif self.slow_since_ns is None:
             self.slow_since_ns = stamp_ns
         self.showing_stop = result.state == STOP
         return result
+
+    def standing_still(self, stamp_ns: int, distance: float | None) -> bool:
+        """Whether the smoothed figure has moved less than ``halted_mps`` x ``halted_s`` over the last ``halted_s``,
+        every frame of it measured (``distance`` None: this frame was not, and the window starts again)."""
+        cfg = self.config
+        if distance is None:
+            self.recent.clear()
+            return False
+        self.recent.append((stamp_ns, distance))
+        while len(self.recent) > 1 and (stamp_ns - self.recent[1][0]) * 1e-9 >= cfg.halted_s:
+            self.recent.popleft()
+        if (stamp_ns - self.recent[0][0]) * 1e-9 < cfg.halted_s:
+            return False
+        figures = [d for _, d in self.recent]
+        return max(figures) - min(figures) <= cfg.halted_mps * cfg.halted_s
 
     def guide_frame(self, image: np.ndarray, quad: np.ndarray | None, tracking: bool, lost: bool,
                     stamp_ns: int) -> GuidanceResult:
@@ -530,13 +562,16 @@ def guide_track(guidance: DockingGuidance, quads: np.ndarray, tracking: np.ndarr
     return rows
 
 
-def display_state(distance: float, showing_stop: bool, config: GuidanceConfig, approached: bool = True) -> int:
-    """The state shown for a distance to go (step 5), given whether STOP is shown now and whether the nose was
-    followed ``approach_m`` towards the mark (if not, slow down stands for STOP and overshoot)."""
+def display_state(distance: float, showing_stop: bool, config: GuidanceConfig, approached: bool = True,
+                  halted: bool = False) -> int:
+    """The state shown for a distance to go (step 5), given whether STOP is shown now, whether the nose was
+    followed ``approach_m`` towards the mark (if not, slow down stands for STOP and overshoot) and whether the
+    aircraft stands still (``halted_s`` within ``halted_mps``: then STOP within ``halted_stop_m``)."""
     if approached and distance < -config.overshoot_m:
         return OVERSHOOT
     if approached and (distance <= config.stop_m or (showing_stop and distance <= config.stop_m
-                                                     + config.stop_release_m)):
+                                                     + config.stop_release_m)
+                       or (halted and distance <= config.halted_stop_m)):
         return STOP
     return SLOW_DOWN if distance <= config.slow_down_m else TRACKING
 
