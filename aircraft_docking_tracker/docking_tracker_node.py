@@ -310,6 +310,7 @@ class DockingProcessor(MessageProcessor):
                   "method": self.tracker.config.method}
         values.update({f"extent {name}": count for name, count in self.tracker.filter.extent_counts.items()})
         values["detections refused (still)"] = self.tracker.still_detections_refused
+        values["overrides refused (vouched)"] = self.tracker.vouched_detections_refused
         if self.tracker.config.start_refit > 0:
             values.update({f"start re-fit {name}": count for name, count in self.tracker.filter.start_counts.items()})
         if self.tracker.config.shape_prior == "silhouette":       # frames whose silhouette moved the shape prior
@@ -323,6 +324,8 @@ class DockingProcessor(MessageProcessor):
                            "guidance frames measured at the nose wheel": self.guidance.gear_measured,
                            "guidance nose-wheel contacts refused (far from the size's range)":
                                self.guidance.gear_refused,
+                           "guidance STOP withheld (figure moving too fast)": self.guidance.stop_withheld,
+                           "guidance STOPs for a standing aircraft": self.guidance.halted_stops,
                            "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name})
         return values
 

@@ -363,7 +363,9 @@ def test_an_aircraft_standing_at_its_mark_behind_a_long_figure_is_shown_stop(sce
         guidance = DockingGuidance(parse_stand(stand), GuidanceConfig(size_sigma=0.01, **cfg))
         states = [guidance.update(quad, True, False, stamp) for quad, _, stamp, _ in frames]
         assert abs(states[-1].distance_m - long_m) < 0.1                    # the figure at the stand reads long
-        return next((i for i, r in enumerate(states) if r.state == STOP), None)
+        first = next((i for i, r in enumerate(states) if r.state == STOP), None)
+        assert guidance.halted_stops == (first is not None and long_m > 0.25)    # counted for the diagnostics
+        return first
 
     assert first_stop(0.0) < standing_from                                  # a true figure: STOP while it closes
     for long_m in (0.35, 0.45):
@@ -390,9 +392,9 @@ def test_no_stop_for_a_figure_that_leaps_to_the_mark(scene, frames):
         results = [guidance.update(frames[i][0], True, False, frames[0][2] + k * NS // 14)
                    for k, i in enumerate(order)]
         first = next(k for k, r in enumerate(results) if r.state == STOP)
-        return first, results[first]
+        return first, results[first], guidance.stop_withheld
 
-    first, result = run()
-    assert first >= start + len(leap) and result.speed_mps <= 2.0
-    first, result = run(arrive_mps=1000.0)
-    assert result.speed_mps > 2.0
+    first, result, withheld = run()
+    assert first >= start + len(leap) and result.speed_mps <= 2.0 and withheld >= 1     # counted for the diagnostics
+    first, result, withheld = run(arrive_mps=1000.0)
+    assert result.speed_mps > 2.0 and withheld == 0

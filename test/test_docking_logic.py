@@ -349,7 +349,7 @@ def test_a_track_the_static_camera_vouches_for_is_not_overridden_by_a_box_of_its
     box, off its centre, IoU 0.24), at the same place frame after frame, restarts a track the static camera does not
     vouch for after override_after frames; not one it vouches for (the silhouette around X̂ has X̂'s place and size,
     FrameResult.on_target, of the filter's last frame), and one vouched frame among unvouched ones starts the count
-    again. With the rule off
+    again; each refused box is counted (vouched_detections_refused, in the node's diagnostics). With the rule off
     the vouched track restarts too (session 29, approach 402: a restart on such a box took IoU 0.86 to 0.11)."""
     frame, track = next(moving_target_scene(1))
     x, y, w, h = ag.to_box(track)
@@ -361,12 +361,12 @@ def test_a_track_the_static_camera_vouches_for_is_not_overridden_by_a_box_of_its
         steps = iter(range(1, 100))
         tracker.filter.step = lambda f: FrameResult(track, 0.9, 20, False, track[None],
                                                     on_target=vouched_on(next(steps)))
-        return [i for i in range(1, 9) if tracker.step(frame, part).started]
+        return [i for i in range(1, 9) if tracker.step(frame, part).started], tracker.vouched_detections_refused
 
-    assert restarts(lambda i: False) == [3]                  # never vouched: the part's box is the aircraft elsewhere
-    assert restarts(lambda i: True) == []
-    assert restarts(lambda i: i == 2) == [6]                 # frames 1-2 counted, then 4-6 after the vouched frame 2
-    assert restarts(lambda i: True, override_vouched=False) == [3]
+    assert restarts(lambda i: False) == ([3], 0)             # never vouched: the part's box is the aircraft elsewhere
+    assert restarts(lambda i: True) == ([], 7)               # frame 1 has no filter frame before it to vouch
+    assert restarts(lambda i: i == 2) == ([6], 1)            # frames 1-2 counted, then 4-6 after the vouched frame 2
+    assert restarts(lambda i: True, override_vouched=False) == ([3], 0)
 
 def test_state_row():
     row = state_row(DockingResult(TRACKING, ag.from_box(0, 0, 40, 10), 0.8, 33))

@@ -416,6 +416,8 @@ class DockingGuidance:
         self.rejected = 0                 # measurements the gate rejected
         self.gear_measured = 0            # frames measured at the nose wheel
         self.gear_refused = 0             # contacts refused: their range disagreed with the size's
+        self.stop_withheld = 0            # frames STOP or overshoot was withheld: the figure moved too fast
+        self.halted_stops = 0             # STOPs shown for an aircraft standing still (halted_stop_m)
         self.last_taken_ns: int | None = None
         self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
         self.slow_since_ns: int | None = None   # when slow down (or nearer) was first shown, continuously
@@ -520,10 +522,16 @@ class DockingGuidance:
         # STOP and overshoot come on with a measurement, never with a prediction alone, after an approach followed
         # and slow down shown long enough; STOP shown stays on until a measurement of a followed approach clears it
         in_zone_s = (stamp_ns - self.slow_since_ns) * 1e-9 if self.slow_since_ns is not None else 0.0
-        followed = (taken and self.farthest_m - result.distance_m >= cfg.approach_m
-                    and -cfg.recede_mps <= result.speed_mps <= cfg.arrive_mps)
+        approached = taken and self.farthest_m - result.distance_m >= cfg.approach_m
+        steady = -cfg.recede_mps <= result.speed_mps <= cfg.arrive_mps
+        followed = approached and steady
         result.state = STOP if self.showing_stop and not followed else display_state(
             result.distance_m, self.showing_stop, cfg, followed and in_zone_s >= cfg.slow_down_min_s, halted)
+        if (approached and not steady and in_zone_s >= cfg.slow_down_min_s and result.state == SLOW_DOWN
+                and display_state(result.distance_m, self.showing_stop, cfg, True, halted) != SLOW_DOWN):
+            self.stop_withheld += 1      # STOP or overshoot but for arrive_mps / recede_mps
+        if result.state == STOP and not self.showing_stop and result.distance_m > cfg.stop_m:
+            self.halted_stops += 1       # STOP came for an aircraft standing still short of stop_m
         if result.state == TRACKING:
             self.slow_since_ns = None
         elif self.slow_since_ns is None:

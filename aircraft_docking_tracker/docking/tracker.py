@@ -225,6 +225,7 @@ class DockingTracker:
         self._seen, self._seen_box = 0, None
         self._vouched = False               # the last filter frame's FrameResult.on_target (override_vouched)
         self.still_detections_refused = 0   # override_moving: override or re-acquisition boxes on the still stand
+        self.vouched_detections_refused = 0  # override_vouched: frames a box away from a vouched track did not count
         if len(self.config.initial_box) == 4:
             self.request_start(self.config.initial_box)
 
@@ -302,11 +303,12 @@ class DockingTracker:
         the aircraft class overlaps the track's box by ``override_iou`` (``override_iou_agreeing`` for a row that
         agrees with the track on the centre, ``geometry.centres_agree``) and the best row is where the last
         counted frame's was (IoU >= 0.3); a row on the track, or with ``override_vouched`` a last frame on which the
-        static camera vouched for the track, resets the count; no row leaves it (the detector misses frames)."""
+        static camera vouched for the track, resets the count (an away box counted in ``vouched_detections_refused``); no
+        row leaves it (the detector misses frames)."""
         cfg = self.config
-        if cfg.override_vouched and self._vouched:
+        vouched = cfg.override_vouched and self._vouched
+        if vouched:
             self._away, self._away_box = 0, None
-            return None
         if detections is None or len(detections) == 0:
             return None
         rows = detections if cfg.detection_class < 0 else detections[detections["class_id"] == cfg.detection_class]
@@ -318,7 +320,8 @@ class DockingTracker:
         on_track = box_iou(boxes, track) >= np.where(agree, cfg.override_iou_agreeing, cfg.override_iou)
         if cfg.keep_agreeing:
             on_track |= agree
-        if on_track.any():
+        if on_track.any() or vouched:
+            self.vouched_detections_refused += bool(vouched and not on_track.any())
             self._away, self._away_box = 0, None
             return None
         self._away, self._away_box = _run_at(self._away, self._away_box, best), best
