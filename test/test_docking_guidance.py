@@ -398,3 +398,26 @@ def test_no_stop_for_a_figure_that_leaps_to_the_mark(scene, frames):
     assert first >= start + len(leap) and result.speed_mps <= 2.0 and withheld >= 1     # counted for the diagnostics
     first, result, withheld = run(arrive_mps=1000.0)
     assert result.speed_mps > 2.0 and withheld == 0
+
+
+def test_a_figure_at_the_speed_clamp_follows_no_approach(scene, frames):
+    """A figure whose rate reaches max_speed_mps is no aircraft (fresh approach 5019: a track re-acquired on a box
+    three times the aircraft's size ran its figure down at the clamp, and STOP was shown 114 m early): the approach
+    followed and the time in slow down count again from there. Here the figure leaps from 10 m to the mark (the gate
+    off, so that the smoothing takes it) and stands there for 3 s: no STOP. With a clamp it does not reach
+    (max_speed_mps 1000), STOP is shown once the figure has settled."""
+    distances = np.array([truth[0] for _, truth, _, _ in frames])
+    start = int(np.argmax(distances < 10.0))
+    order = list(range(start)) + [len(frames) - 1] * 42
+
+    def states(**cfg):
+        guidance = DockingGuidance(parse_stand(scene.stand_calibration()),
+                                   GuidanceConfig(size_sigma=0.01, gate_sigma=0.0, **cfg))
+        results = [guidance.update(frames[i][0], True, False, frames[0][2] + k * NS // 14)
+                   for k, i in enumerate(order)]
+        return results[start:]
+
+    leapt = states()
+    assert max(r.speed_mps for r in leapt) >= 12.0 and abs(leapt[-1].distance_m) < 0.3
+    assert STOP not in [r.state for r in leapt] and OVERSHOOT not in [r.state for r in leapt]
+    assert STOP in [r.state for r in states(max_speed_mps=1000.0)]

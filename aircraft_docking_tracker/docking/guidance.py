@@ -41,7 +41,9 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    (:data:`GATE_AFTER` measurements), a distance more than ``gate_sigma`` sigmas of the innovation
    from the prediction is rejected and counted (an aircraft does not jump; a tracker that slips onto the
    jet bridge does), and the prediction is shown; rejected for longer than ``gate_hold_s``, the filter
-   restarts from the new figures. The closing rate is held within ``max_speed_mps``.
+   restarts from the new figures. The closing rate is held within ``max_speed_mps``; a rate at that clamp is no
+   aircraft (a track that jumped, or re-acquired on the wrong thing), and the approach followed and the time in
+   slow down (step 5) count again from there.
 5. **State** (as the display shows it): 0 no aircraft (the tracker waits), 1 tracking, 2 slow down
    (within ``slow_down_m`` of the mark), 3 STOP (within ``stop_m`` of the mark, or past it by less than
    ``overshoot_m``; once shown it holds until the aircraft is ``stop_release_m`` beyond ``stop_m``
@@ -118,8 +120,9 @@ class GuidanceConfig:
     gate_hold_s: float = param(1.0, "rejected for longer than this [s], the smoothing restarts from the new figures "
                                "(the gate holds its prediction until then)", low=0.0, high=60.0)
     max_speed_mps: float = param(12.0, "the smoothing's closing speed is held within this [m/s] (an aircraft taxies "
-                                 "in at a few; a two-point start on noisy figures can give a rate of tens)", low=0.1,
-                                 high=1000.0)
+                                 "in at a few; a two-point start on noisy figures can give a rate of tens); a rate at "
+                                 "it is no aircraft: STOP and overshoot need an approach followed anew after it",
+                                 low=0.1, high=1000.0)
     approach_m: float = param(3.0, "STOP and overshoot are shown only once the smoothing has followed the nose "
                               "this far towards the mark since it (re)started [m] (a lock on something standing, "
                               "or a figure that jumps, shows slow down instead)", low=0.0, high=1000.0)
@@ -516,7 +519,11 @@ class DockingGuidance:
             self.rejected += 1
         result.measurement_taken = taken
         result.distance_m, result.lateral_m, result.speed_mps = float(distance), float(lateral), float(-rate)
-        if taken:
+        if abs(rate) >= cfg.max_speed_mps:
+            # a figure moving at the clamp is no aircraft (a track that jumped, a restart on the wrong thing): the
+            # approach followed and the time in slow down count again from here
+            self.farthest_m, self.slow_since_ns = float(distance), None
+        elif taken:
             self.farthest_m = float(np.fmax(self.farthest_m, distance))
         halted = self.standing_still(stamp_ns, result.distance_m if taken else None)
         # STOP and overshoot come on with a measurement, never with a prediction alone, after an approach followed
