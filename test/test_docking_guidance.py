@@ -376,6 +376,14 @@ def test_an_aircraft_standing_at_its_mark_behind_a_long_figure_is_shown_stop(sce
     assert first_stop(0.8) is None
 
 
+def _replay(scene, frames, order, **cfg):
+    """The guidance over the scene's true quadrilaterals in ``order`` (frame indices, repeats allowed), stamped at
+    14 Hz one after another: the guidance and its results."""
+    guidance = DockingGuidance(parse_stand(scene.stand_calibration()), GuidanceConfig(**cfg))
+    return guidance, [guidance.update(frames[i][0], True, False, frames[0][2] + k * NS // 14)
+                      for k, i in enumerate(order)]
+
+
 def test_no_stop_for_a_figure_that_leaps_to_the_mark(scene, frames):
     """arrive_mps: a figure that runs the last 8 m to the mark at 5 m/s (a track on something else; fresh approach
     1004 showed STOP 171 m early so) shows no STOP while it closes that fast; STOP comes once it has slowed to
@@ -388,9 +396,7 @@ def test_no_stop_for_a_figure_that_leaps_to_the_mark(scene, frames):
     order = list(range(start)) + leap + [standing] * 40                 # then 40 frames (3 s) at the mark
 
     def run(**cfg):
-        guidance = DockingGuidance(parse_stand(scene.stand_calibration()), GuidanceConfig(size_sigma=0.01, **cfg))
-        results = [guidance.update(frames[i][0], True, False, frames[0][2] + k * NS // 14)
-                   for k, i in enumerate(order)]
+        guidance, results = _replay(scene, frames, order, size_sigma=0.01, **cfg)
         first = next(k for k, r in enumerate(results) if r.state == STOP)
         return first, results[first], guidance.stop_withheld
 
@@ -411,11 +417,7 @@ def test_a_figure_at_the_speed_clamp_follows_no_approach(scene, frames):
     order = list(range(start)) + [len(frames) - 1] * 42
 
     def states(**cfg):
-        guidance = DockingGuidance(parse_stand(scene.stand_calibration()),
-                                   GuidanceConfig(size_sigma=0.01, gate_sigma=0.0, **cfg))
-        results = [guidance.update(frames[i][0], True, False, frames[0][2] + k * NS // 14)
-                   for k, i in enumerate(order)]
-        return results[start:]
+        return _replay(scene, frames, order, size_sigma=0.01, gate_sigma=0.0, **cfg)[1][start:]
 
     leapt = states()
     assert max(r.speed_mps for r in leapt) >= 12.0 and abs(leapt[-1].distance_m) < 0.3
