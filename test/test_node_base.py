@@ -205,6 +205,25 @@ def test_latency_is_reported_for_live_stamps_and_explained_for_stamps_on_another
     assert slightly_ahead["latency_ms_p50"] == 0.0 and text == "0.00"
 
 
+
+def test_processing_time_is_that_of_the_input_the_node_works_on():
+    """A node with two inputs (the docking tracker: images it tracks in, ~12 ms, and detection tables it only keeps,
+    ~0.2 ms) reports the processing time of the input with the most processing time, whichever kind has one message
+    more; each input's own median is reported beside (over all messages the median flipped between the two)."""
+    for images, tables in ((208, 210), (210, 208)):
+        stats = ProcessingStats()
+        for _ in range(images):
+            stats.record(0.012, None, "image")
+        for _ in range(tables):
+            stats.record(0.0002, None, "detections")
+        summary = stats.summary()
+        assert summary["main_topic"] == "image" and summary["processing_ms_p50"] == pytest.approx(12.0)
+        assert summary["processing_ms_p50 detections"] == pytest.approx(0.2)
+        assert summary["processing_ms_p50 image"] == pytest.approx(12.0)
+    single = ProcessingStats()
+    single.record(0.005, None, "image")
+    assert "processing_ms_p50 image" not in single.summary() and single.summary()["processing_ms_p50"] == 5.0
+
 def test_a_failed_warm_up_is_logged_by_the_node_and_the_node_still_runs(monkeypatch):
     """MessageProcessor.warm_up keeps the failure; attach_processor logs it as a warning (every node alike)."""
     class ColdProcessor(ToyProcessor):

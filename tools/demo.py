@@ -206,9 +206,10 @@ def print_summary(results: dict, out: Path) -> None:
     # Per-node figures from the nodes' own /diagnostics (end-to-end latency with wall-clock stamps
     # is measured by `make bench`, bench/pipeline.py: recorder log times lag when the CPU is busy).
     for node, values in sorted(results["diagnostics"].items()):
-        print(f"  {node}: {values.get('processed')} frames processed, {values.get('skipped')} skipped "
-              f"(keep-newest), {values.get('rejected')} rejected; processing p50 {values.get('processing_ms_p50')} ms, "
-              f"max {values.get('processing_ms_max')} ms")
+        of = f" per {values['processing_topic']}" if "processing_topic" in values else ""
+        print(f"  {node}: {values.get('processed')} messages processed, {values.get('skipped')} skipped "
+              f"(keep-newest), {values.get('rejected')} rejected; processing{of} p50 {values.get('processing_ms_p50')} "
+              f"ms, max {values.get('processing_ms_max')} ms")
     print(f"report: {out / 'report'} (summary.md, summary.json, plots and strips per camera)")
 
 

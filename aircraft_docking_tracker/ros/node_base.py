@@ -386,6 +386,9 @@ class PerceptionNode(Node):
             "rejected": str(self.stats.rejected_total),
             "time_jumps": str(self.stats.time_jumps),
         }
+        if "main_topic" in summary:                  # the input the processing figures are of (several inputs)
+            values["processing_topic"] = summary["main_topic"]
+        values.update({k: f"{v:.2f}" for k, v in summary.items() if k.startswith("processing_ms_p50 ")})
         for reason, count in self.stats.rejected.most_common():   # every kind, not just the top few
             values[f"rejected: {reason}"] = str(count)
         for name, why in self.config_errors.items():
