@@ -358,3 +358,32 @@ def test_a_start_turned_near_45_deg_takes_its_sides_from_the_silhouette(degrees)
         turns.append(abs(np.rad2deg(params[4]) - degrees))
     assert np.median(log_aspects) > 0.45
     assert np.median(turns) < 5.0
+
+
+def test_sides_fitted_in_the_box_that_disagree_with_the_silhouette_are_refused(monkeypatch):
+    """start_max_disagreement: near 40 deg an axis a few degrees off makes rotated_in_box's sides absurd (here the
+    aircraft turned 33 deg, the silhouette's axis read 7 deg more, as rain gave on approaches 204, 413 and 6001: the
+    sides come out 4:1 against the silhouette's elongation of about 2). The re-fit is refused and counted, and
+    the track keeps its loose box; with the check off the track takes the absurd rectangle."""
+    import dataclasses  # noqa: PLC0415
+
+    import aircraft_docking_tracker.docking.ispf as ispf  # noqa: PLC0415
+
+    def seven_degrees_off(*args, **kwargs):
+        found = start_silhouette(*args, **kwargs)
+        return None if found is None else dataclasses.replace(found, axis_angle=found.axis_angle + np.deg2rad(7.0))
+
+    monkeypatch.setattr(ispf, "start_silhouette", seven_degrees_off)
+    frames, box = aircraft_frames(33.0, np.random.default_rng(0), n=7)
+
+    def start(**cfg):
+        tracker = DockingTracker(DockingConfig(seed=0, **cfg))
+        tracker.start(frames[0], ag.to_box(box))
+        for frame in frames[1:]:
+            result = tracker.step(frame)
+        return {k for k, v in tracker.filter.start_counts.items() if v}, ag.to_params(result.matrix[None])[0][3]
+
+    counts, aspect = start()
+    assert counts == {"disagree"} and aspect < 1.6                    # the loose box's 1.16, as the track started
+    counts, aspect = start(start_max_disagreement=0.0)
+    assert counts == {"refitted"} and aspect > 3.0                    # 4.1 on tracker seeds 0-2

@@ -326,6 +326,14 @@ class FilterConfig(AppearanceConfig):
                                         "an aircraft's filled hull came out 1.23-1.47 on 8 of the 120 approaches "
                                         "measured, and on all 8 the re-fitted start box was nearer the truth than the "
                                         "level one: IoU 0.53-0.86 against 0.46-0.54; 1.5 until session 20)", low=1.0, high=10.0)
+    start_max_disagreement: float = param(2.0, "start_refit: the sides fitted in the start box (rotated_in_box) are "
+                                          "refused when they are more than this many times as elongated as the start "
+                                          "silhouette (near 40 deg an axis read a few degrees too steep turns the box "
+                                          "into a sliver: in rain the axis came 5-66 deg off and the sides 4-6:1 "
+                                          "against an elongation of 1.3-1.7 on approaches 204, 413 and 6001, every "
+                                          "tracker seed, and the track never levelled; refused, all 9 runs showed STOP "
+                                          "within 0.5 m; on 177 other approaches it never acts); 0: off",
+                                          low=0.0, high=100.0)
     start_axis: str = param("hull", "start_refit: the start silhouette's axis. hull: on the frames (at most "
                             "start_width px wide, in colour when the frames are BGR), the principal axis of the convex "
                             "hull of the silhouette's largest piece (the wing tips and the fin set it, not the filled "
@@ -487,7 +495,7 @@ class AffineParticleFilter:
         # start_refit: (frame as given, grey or BGR; X̂; whether the model learnt X̂'s patch) since the start
         self._start_track: list[tuple[np.ndarray, np.ndarray | None, bool]] = []
         self.start_counts = {"refitted": 0, "no silhouette": 0, "hidden": 0, "no axis": 0, "outside": 0,
-                             "moved": 0, "untrusted": 0, "invalid": 0}
+                             "moved": 0, "untrusted": 0, "invalid": 0, "disagree": 0}
         self._still_run = 0                 # frames in a row the target was still (extent_still_after)
         self._shaped = False                # learn_rotation shaped: the track started on the target's rotation
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "filling": 0, "still": 0, "none": 0,
@@ -927,8 +935,10 @@ class AffineParticleFilter:
         a moving camera or a foreground not trusted on this frame, X̂ moved more than ``start_max_motion`` box
         sizes (``moved``: the silhouette would be the target's trail), no silhouette, an aircraft hidden
         (``start_min_fill``), no axis (elongation below ``start_min_elongation``), too much moving outside
-        (``start_max_outside``: rain, a moving camera), no rectangle of positive sides fits the box, or the
-        re-fitted state is not a valid one (``invalid``)."""
+        (``start_max_outside``: rain, a moving camera), no rectangle of positive sides fits the box, sides fitted in
+        the box more than ``start_max_disagreement`` times as elongated as the silhouette (``disagree``: an axis read
+        a few degrees too steep near 40 deg), or the re-fitted state is not a valid one
+        (``invalid``)."""
         cfg, box = self.config, self._start_box
         if not self._static_camera or self.background.foreground is None:
             self.start_counts["untrusted"] += 1
@@ -967,6 +977,11 @@ class AffineParticleFilter:
         if fitted is None:
             self.start_counts["no silhouette"] += 1
             return None
+        if not by_silhouette and cfg.start_max_disagreement > 0:
+            width, height = np.linalg.norm(fitted[:2, :2], axis=0)
+            if width / height > cfg.start_max_disagreement * aspect:   # a sliver: the axis read too near 45 deg
+                self.start_counts["disagree"] += 1
+                return None
         change = ag.inverse(box) @ fitted
         moved = estimate @ change
         if not self._valid(moved[None])[0]:
