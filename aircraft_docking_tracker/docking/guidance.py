@@ -51,8 +51,9 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    no figure is shown, and the filter starts afresh on the next track). STOP and overshoot need an
    approach: since the filter (re)started it must have followed the nose ``approach_m`` towards the
    mark, and the figure must move slower than ``arrive_mps`` towards it and ``recede_mps`` away from it (an
-   aircraft reaches its mark at walking pace, and does not back away), else slow down is shown in their place -- a track that starts on, or restarts onto, something
-   standing near the mark (a vehicle, the jet bridge) shows no STOP; slow down must have been shown for
+   aircraft reaches its mark at walking pace, and does not back away), else slow down is shown in their place --
+   a track that starts on, or restarts onto, something standing near the mark (a vehicle, the jet bridge) shows
+   no STOP; slow down must have been shown for
    ``slow_down_min_s`` first, continuously (a tracker that slips between the aircraft and the clutter makes
    the figure jump across the zone in a frame); and STOP and overshoot come on only on a frame whose
    measurement was taken, never while the gate holds the prediction. An aircraft **standing still** (its smoothed
@@ -142,7 +143,8 @@ class GuidanceConfig:
                               "that leaps there does not (a track on something else, a nose wheel's row a few pixels "
                               "off for a frame). On the 240 guidance bench runs 2, 2.5, 3 and 4 take every STOP shown "
                               "more than 1 m early (6 runs of 240, one 171 m: one now shows no STOP, the others "
-                              "within 0.5 m) and put none outside 0.5 m; the tuning set chose 2; 1000: off", low=0.0, high=1000.0)
+                              "within 0.5 m) and put none outside 0.5 m; the tuning set chose 2; 1000: off",
+                              low=0.0, high=1000.0)
     halted_stop_m: float = param(0.5, "STOP is also shown for an aircraft standing still within this of the mark [m] "
                                  "(the +-0.5 m an advanced VDGS stops to): a stand surveyed to half a pixel can read "
                                  "its last metres a few tenths long, and an aircraft stood at its mark without STOP "
