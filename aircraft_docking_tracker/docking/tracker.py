@@ -321,7 +321,7 @@ class DockingTracker:
         if cfg.keep_agreeing:
             on_track |= agree
         if on_track.any() or vouched:
-            self.vouched_detections_refused += bool(vouched and not on_track.any())
+            self.vouched_detections_refused += not on_track.any()    # away from the track, kept for the vouching
             self._away, self._away_box = 0, None
             return None
         self._away, self._away_box = _run_at(self._away, self._away_box, best), best

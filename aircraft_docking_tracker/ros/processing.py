@@ -192,7 +192,7 @@ class ProcessingStats:
             by_topic[event[3]].append(event)
         if len(by_topic) > 1:
             for topic, events in sorted(by_topic.items()):
-                out[f"processing_ms_p50 {topic}"] = sorted(e[1] * 1e3 for e in events)[len(events) // 2]
+                out[f"processing_ms_p50 {topic}"] = _processing_ms(events)[len(events) // 2]
         main = max(by_topic, key=lambda t: sum(e[1] for e in by_topic[t]), default="")
         events = by_topic.get(main, [])
         recent = [e for e in events if now - e[0] <= self.window_s]
@@ -200,7 +200,7 @@ class ProcessingStats:
             out["rate_hz"] = (len(recent) - 1) / max(recent[-1][0] - recent[0][0], 1e-3)
         if events:
             out["main_topic"] = main
-            proc = sorted(e[1] * 1e3 for e in events)
+            proc = _processing_ms(events)
             out["processing_ms_p50"] = proc[len(proc) // 2]
             out["processing_ms_p95"] = proc[min(len(proc) - 1, int(0.95 * len(proc)))]
             out["processing_ms_max"] = proc[-1]
@@ -272,6 +272,11 @@ def process_guarded(processor: MessageProcessor, topic: str, msg: Any, stats: Pr
         age = (now_ns() - stamp) / 1e9  # signed: ProcessingStats.summary tells latency from a foreign clock
     stats.record(time.perf_counter() - started, age, topic)
     return outputs
+
+
+def _processing_ms(events) -> list[float]:
+    """The processing times [ms] of ``ProcessingStats`` events, sorted (for their percentiles)."""
+    return sorted(e[1] * 1e3 for e in events)
 
 
 _NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
