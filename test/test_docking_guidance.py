@@ -323,6 +323,65 @@ def test_stop_stays_on_when_the_track_breaks_up_at_the_mark(scene, frames):
     assert guidance.update(broken, True, False, stamp + 42 * NS // 14).state != STOP
 
 
+def _contact(stand, nose_ground) -> np.ndarray:
+    """A nose-wheel row measured exactly where ``nose_ground`` (on the apron) projects."""
+    gear = np.full(1, np.nan, NOSE_GEAR_DTYPE)
+    gear["axis_x"], gear["axis_y"] = gear["ground_x"], gear["ground_y"] = stand.camera.project([[*nose_ground, 0.0]])[0]
+    return gear
+
+
+@pytest.mark.parametrize("wheel", [False, True])
+def test_figures_hold_at_the_mark_when_the_track_breaks_up(scene, frames, wheel):
+    """stop_holds: under STOP a quadrilateral that grows onto the jet bridge (1.6x: the size reads the aircraft
+    tens of metres past its mark) or slides 4 m sideways is refused for as long as it lasts -- 5 s here, the gate
+    never giving up -- and the figures stay where the aircraft stopped, at rest (speed 0); when the track comes back
+    it is taken again. With the nose wheel measured, a frame without it is not taken even when the gate would let
+    it through. With the rule off the figures follow the broken track once gate_hold_s is over."""
+    def run(**cfg):
+        stand = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
+        guidance = DockingGuidance(stand, GuidanceConfig(size_sigma=0.01, **cfg))
+        for quad, _, stamp, nose_ground in frames:
+            result = guidance.update(quad, True, False, stamp, _contact(stand, nose_ground) if wheel else None)
+        assert result.state == STOP and abs(result.distance_m) < 0.1
+        quad, _, stamp, nose_ground = frames[-1]
+        centre, spread = quad.mean(axis=0), quad - quad.mean(axis=0)
+        grown = centre + spread * 1.6
+        slid = quad + stand.camera.project([[4.0, 0.0, 0.0]])[0] - stand.camera.project([[0.0, 0.0, 0.0]])[0]
+        broken = [grown] * 40 + [slid] * 30
+        held = [guidance.update(q, True, False, stamp + (k + 1) * NS // 14) for k, q in enumerate(broken)]
+        back = guidance.update(quad, True, False, stamp + 71 * NS // 14,
+                               _contact(stand, nose_ground) if wheel else None)
+        return guidance, held, back
+
+    guidance, held, back = run()
+    assert {r.state for r in held} == {STOP} and not any(r.measurement_taken for r in held)
+    assert max(abs(r.distance_m) for r in held) < 0.1 and max(abs(r.lateral_m - held[0].lateral_m) for r in held) < 0.05
+    assert max(abs(r.speed_mps) for r in held) == 0.0
+    assert guidance.held_at_stop == len(held) and guidance.restarts == 0
+    assert back.measurement_taken and abs(back.distance_m) < 0.1 and back.state == STOP
+    _, loose, _ = run(stop_holds=False)
+    assert max(abs(r.distance_m) for r in loose) > 10.0                       # the broken track's figures
+
+
+def test_a_creep_past_the_mark_after_stop_is_shown_overshoot(scene, frames):
+    """stop_holds leaves a slow creep on past the mark to be followed: an aircraft that rolls on at 0.3 m/s, with
+    its nose wheel measured, is shown overshoot once it is overshoot_m past, and its figures follow it there."""
+    stand = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
+    guidance = DockingGuidance(stand, GuidanceConfig(size_sigma=0.01))
+    for quad, _, stamp, nose_ground in frames:
+        result = guidance.update(quad, True, False, stamp, _contact(stand, nose_ground))
+    assert result.state == STOP
+    quad, _, stamp, nose_ground = frames[-1]
+    heading = np.array([0.0, -1.0])                                           # the line runs on towards -y
+    states = []
+    for k in range(1, 80):                                                    # 5.6 s at 0.3 m/s: 1.7 m on
+        moved = np.asarray(nose_ground[:2], float) + heading * 0.3 * k / 14
+        shift = stand.camera.project([[*moved, 0.0]])[0] - stand.camera.project([[*nose_ground[:2], 0.0]])[0]
+        result = guidance.update(quad + shift, True, False, stamp + k * NS // 14, _contact(stand, moved))
+        states.append(result.state)
+    assert OVERSHOOT in states and result.distance_m == pytest.approx(-1.7, abs=0.3)
+
+
 def test_no_stop_for_a_figure_that_comes_back_through_the_mark(scene, frames):
     """recede_mps: a followed approach shows STOP at the mark; a figure that then runs on past it (overshoot) and
     comes back through the mark at several m/s (a track that jumped onto something else: fresh approach 1009 showed

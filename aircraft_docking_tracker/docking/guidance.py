@@ -62,6 +62,13 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    at its mark on slow down. STOP, once shown, is cleared only by a
    measurement of a followed approach (or by the tracker losing the aircraft): a smoothing that restarted
    at the mark -- a tracker that breaks up once the aircraft has stood there -- keeps it on.
+6. **At rest under STOP** (``stop_holds``): an aircraft shown STOP brakes to rest at its mark, and a track on it
+   that breaks up (a template grown onto the jet bridge, a nose wheel found on the apron) reads it tens of metres
+   away. While STOP is shown the smoothing takes the aircraft to be at rest: a measurement the gate rejects -- on
+   either figure -- leaves the figures as they were (no prediction, rate 0, the gate not widening), the gate never
+   gives up on them (``gate_hold_s`` does not restart the smoothing), and once the figures rest on the nose wheel a
+   frame without it is not taken. An aircraft that creeps on past its mark moves a few centimetres a frame: it is
+   followed, and shown overshoot.
 """
 from __future__ import annotations
 
@@ -155,6 +162,13 @@ class GuidanceConfig:
                               "standstill); 0.1 to 0.2 change the same runs", low=0.0, high=10.0)
     halted_s: float = param(1.0, "standing still: over this long [s] (1 and 2 change the same runs)", low=0.01,
                             high=60.0)
+    stop_holds: bool = param(True, "while STOP is shown the aircraft is braking to rest at its mark: a measurement the "
+                             "gate rejects (on either figure) leaves the figures where they were (no prediction, rate "
+                             "0), the gate never gives up on them (no gate_hold_s restart), and once the nose wheel is "
+                             "measured a figure without it is not taken. A creep past the mark is still followed, "
+                             "frame by frame, to overshoot. A tracker that breaks up on the parked aircraft had shown "
+                             "it 20-45 m past its mark under STOP (fresh approaches 6001, 6007, 6010; held out 201, "
+                             "207, 219)")
     gear_pixel_sigma: float = param(0.25, "the nose wheel's measured ground contact's error [px, 1 sigma] (its "
                                     "range's weight)", low=0.01, high=1000.0)
     gear_min_height_px: float = param(80.0, "measure the nose wheel's ground contact once the tracked template "
@@ -370,18 +384,29 @@ class ConstantVelocityFilter:
         self.P = F @ self.P @ F.T + q
 
     def step(self, dt: float, z: np.ndarray, r: np.ndarray, gate: float = 0.0,
-             max_rate: float = np.inf) -> tuple[np.ndarray, bool]:
+             max_rate: float = np.inf, at_rest: bool = False) -> tuple[np.ndarray, bool]:
         """Predict over ``dt`` [s], update with measurements ``z`` of variances ``r``; (the filtered (value, rate),
         whether the measurement was taken). The first measurement sets the value (rate 0), the second the rate by
         difference (two-point start). Once ``GATE_AFTER`` are taken, with ``gate`` > 0, a measurement whose first
-        channel's innovation exceeds ``gate`` of its sigma is not taken: the prediction is returned. The rates are
-        held within ``max_rate``."""
-        x, taken = self._step(dt, z, r, gate)
+        channel's innovation exceeds ``gate`` of its sigma (any channel's, for a target ``at_rest``) is not taken:
+        the prediction is returned, or, at rest, the state as it was with its rates zeroed (no time passes for it:
+        it neither moves nor grows more uncertain, so the gate does not widen). The rates are held within
+        ``max_rate``."""
+        kept = (self.x.copy(), self.P.copy())
+        x, taken = self._step(dt, z, r, gate, len(z) if at_rest else 1)
+        if not taken and at_rest:
+            self.x, self.P = kept
+            x = self.hold()
         self.x[:, 1] = np.clip(self.x[:, 1], -max_rate, max_rate)
         x[:, 1] = self.x[:, 1]
         return x, taken
 
-    def _step(self, dt: float, z, r, gate: float) -> tuple[np.ndarray, bool]:
+    def hold(self) -> np.ndarray:
+        """A target at rest, not measured: the values stay, the rates are zeroed; the state."""
+        self.x[:, 1] = 0.0
+        return self.x.copy()
+
+    def _step(self, dt: float, z, r, gate: float, channels: int) -> tuple[np.ndarray, bool]:
         z, r = np.asarray(z, np.float64), np.asarray(r, np.float64)
         if self.seen == 0 or (self.seen == 1 and dt > 0):
             self.seen += 1
@@ -395,7 +420,7 @@ class ConstantVelocityFilter:
         self.predict(dt)
         innovation = z - self.x[:, 0]
         s = self.P[:, 0, 0] + r
-        if gate > 0 and self.seen >= GATE_AFTER and abs(innovation[0]) > gate * np.sqrt(s[0]):
+        if gate > 0 and self.seen >= GATE_AFTER and (np.abs(innovation) > gate * np.sqrt(s))[:channels].any():
             return self.x.copy(), False
         self.seen += 1
         gain = self.P[:, :, 0] / s[:, None]
@@ -423,7 +448,9 @@ class DockingGuidance:
         self.gear_refused = 0             # contacts refused: their range disagreed with the size's
         self.stop_withheld = 0            # frames STOP or overshoot was withheld: the figure moved too fast
         self.halted_stops = 0             # STOPs shown for an aircraft standing still (halted_stop_m)
+        self.held_at_stop = 0             # frames under STOP whose measurement was not taken (stop_holds)
         self.last_taken_ns: int | None = None
+        self.last_taken_gear = False      # the last measurement taken was of the nose wheel
         self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
         self.slow_since_ns: int | None = None   # when slow down (or nearer) was first shown, continuously
         self.recent: deque = deque()      # (stamp, smoothed distance) of the measured frames of the last halted_s
@@ -436,6 +463,7 @@ class DockingGuidance:
     def restart(self) -> None:
         """The smoothing starts afresh: no rate, and no approach followed yet."""
         self.filter.reset()
+        self.last_taken_gear = False
         self.farthest_m = float("nan")
         self.slow_since_ns = None
         self.recent.clear()
@@ -506,19 +534,26 @@ class DockingGuidance:
         self.gear_measured += result.gear_measured
         self.gear_refused += result.gear_refused
         dt = (stamp_ns - self.last_stamp_ns) * 1e-9 if self.last_stamp_ns is not None else 0.0
+        at_rest = self.showing_stop and cfg.stop_holds          # step 6
         if self.last_stamp_ns is not None and not (0.0 < dt <= cfg.max_gap_s):
             self.restarts += 1
             self.restart()
-        elif self.last_taken_ns is not None and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.gate_hold_s:
+        elif (not at_rest and self.last_taken_ns is not None
+              and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.gate_hold_s):
             self.restart()               # rejected for longer than gate_hold_s: the aircraft is where it is now
         self.last_stamp_ns = stamp_ns
-        filtered, taken = self.filter.step(dt, [result.distance_m, result.lateral_m], [sigma ** 2, lateral_sigma ** 2],
-                                           cfg.gate_sigma, cfg.max_speed_mps)
+        if at_rest and self.last_taken_gear and not result.gear_measured:
+            filtered, taken = self.filter.hold(), False    # the nose wheel's figures are not left for the template's
+        else:
+            filtered, taken = self.filter.step(dt, [result.distance_m, result.lateral_m],
+                                               [sigma ** 2, lateral_sigma ** 2], cfg.gate_sigma, cfg.max_speed_mps,
+                                               at_rest=at_rest)
         (distance, rate), (lateral, _) = filtered
         if taken:
-            self.last_taken_ns = stamp_ns
+            self.last_taken_ns, self.last_taken_gear = stamp_ns, result.gear_measured
         else:
             self.rejected += 1
+            self.held_at_stop += at_rest
         result.measurement_taken = taken
         result.distance_m, result.lateral_m, result.speed_mps = float(distance), float(lateral), float(-rate)
         if abs(rate) >= cfg.max_speed_mps:
