@@ -172,10 +172,13 @@ def score(approach: dict, guided: dict) -> dict:
     from aircraft_docking_tracker.docking.guidance import true_guidance  # noqa: PLC0415
     from aircraft_docking_tracker.evaluation.guidance_metrics import guidance_errors  # noqa: PLC0415
 
-    e = guidance_errors(guided["rows"], true_guidance(*approach["truth"].T), NEAR_M)
+    truth = true_guidance(*approach["truth"].T)
+    e = guidance_errors(guided["rows"], truth, NEAR_M)
     near = approach["truth"][:, 0] <= NEAR_M
     drawn = np.abs(guided["rows"]["distance_m"][near] - approach["drawn"][near])
-    return {"distance_p95_drawn": float(np.percentile(drawn, 95)) if np.isfinite(drawn).all() else float("inf"),
+    return {"_near_errors": np.abs(np.c_[guided["rows"]["lateral_m"][near] - truth["lateral_m"][near],
+                                         guided["rows"]["distance_m"][near] - truth["distance_m"][near]]),
+            "distance_p95_drawn": float(np.percentile(drawn, 95)) if np.isfinite(drawn).all() else float("inf"),
             "lateral_p50": e["lateral_near_median"], "lateral_p95": e["lateral_near_p95"],
             "distance_p50": e["distance_near_median"], "distance_p95": e["distance_near_p95"],
             "stop_at_m": e["stop_at_m"], "stop_ok": e["stop_within"], "stop_early": e["stop_early"],
@@ -251,7 +254,10 @@ def summary(rows: list[dict]) -> dict:
 
     def worst(k):
         return float(np.max([r[k] for r in rows]))
+    pooled = np.nan_to_num(np.concatenate([r["_near_errors"] for r in rows]), nan=np.inf)   # no figure: infinite
     return {"runs": len(rows),
+            "lateral_p95_pooled": float(np.percentile(pooled[:, 0], 95, method="higher")),
+            "distance_p95_pooled": float(np.percentile(pooled[:, 1], 95, method="higher")),
             "lateral_p95_mean": float(np.mean(col("lateral_p95"))), "lateral_p95_worst": worst("lateral_p95"),
             "lateral_p50_median": float(np.median(col("lateral_p50"))),
             "distance_p95_mean": float(np.mean(col("distance_p95"))),
@@ -302,6 +308,15 @@ def tune(approaches: list[dict]) -> tuple[dict, list]:
     return {k: best[k] for k in GRID}, table
 
 
+def _constant(default, text: str):
+    """``--set``'s value in its default's type (a boolean from true/false, 1/0, on/off)."""
+    if isinstance(default, bool):
+        if text.lower() not in ("true", "false", "1", "0", "on", "off"):
+            raise SystemExit(f"--set: {text!r} is not a boolean")
+        return text.lower() in ("true", "1", "on")
+    return type(default)(text)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--approaches", type=int, default=20)
@@ -329,7 +344,7 @@ def main() -> int:
     jobs = [(seed0 + k, k, args.frames, args.seeds, str(cache)) for k in range(args.approaches)]
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
         done = list(pool.imap_unordered(track_approach, jobs))
-    overrides = {k: type(getattr(GuidanceConfig(), k))(v) for k, v in (s.split("=", 1) for s in args.set)}
+    overrides = {k: _constant(getattr(GuidanceConfig(), k), v) for k, v in (s.split("=", 1) for s in args.set)}
     paths = sorted(d["path"] for d in done)
     gear_config = {k: v for k, v in asdict(replace(GuidanceConfig(), **overrides)).items()
                    if k in GEAR_KEYS or k in ("stand_file", "aircraft_type")}
@@ -347,7 +362,8 @@ def main() -> int:
         print("chosen", chosen)
     config = replace(GuidanceConfig(), **overrides)
     rows = evaluate(approaches, config)
-    payload.update({"config": asdict(config), "summary": summary(rows), "rows": rows,
+    payload.update({"config": asdict(config), "summary": summary(rows),
+                    "rows": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
                     "tracker_ms_per_frame": float(np.median(np.concatenate(
                         [a["seconds"][:, 1:].ravel() for a in approaches])) * 1e3)})
     measured = np.concatenate([a["gear_seconds"][np.isfinite(a["gears"]["symmetry"])] for a in approaches]) * 1e3
@@ -369,6 +385,8 @@ def markdown(payload: dict, approaches: list[dict]) -> list[str]:
           "Guidance constants: " + ", ".join(f"{k} {v}" for k, v in payload["config"].items()
                                              if k not in ("stand_file", "aircraft_type")), "",
           "| measure | target | measured (mean over runs / median / worst run) |", "|---|---|---|",
+          f"| lateral and distance errors within the last 15 m, p95 of every frame of every run | <= 0.25 / 0.5 m | "
+          f"{s['lateral_p95_pooled']:.2f} / {s['distance_p95_pooled']:.2f} m |",
           f"| lateral error within the last 15 m, p95 | <= 0.25 m | {s['lateral_p95_mean']:.2f} / "
           f"{s['lateral_p95_median']:.2f} / {s['lateral_p95_worst']:.2f} m (median error {s['lateral_p50_median']:.2f} m); "
           f"met on {s['runs_lateral_met']} of {s['runs']} runs |",
