@@ -180,7 +180,7 @@ def test_status_reports_the_static_camera_extent_counts():
     starts = {k: v for k, v in status.items() if k.startswith("start re-fit ")}
     assert set(starts) == {f"start re-fit {name}" for name in
                            ("refitted", "no silhouette", "hidden", "no axis", "outside", "moved", "untrusted",
-                            "invalid", "disagree")}
+                            "invalid", "disagree", "steep")}
     assert sum(starts.values()) == 1
 
 

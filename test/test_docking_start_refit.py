@@ -387,3 +387,37 @@ def test_sides_fitted_in_the_box_that_disagree_with_the_silhouette_are_refused(m
     assert counts == {"disagree"} and aspect < 1.6                    # the loose box's 1.16, as the track started
     counts, aspect = start(start_max_disagreement=0.0)
     assert counts == {"refitted"} and aspect > 3.0                    # 4.1 on tracker seeds 0-2
+
+
+@pytest.mark.parametrize("degrees", [-38.0, 38.0])
+def test_a_start_axis_read_beyond_45_deg_keeps_the_level_box(monkeypatch, degrees):
+    """start_steep_deg: a rain silhouette's axis reads a turned aircraft's span too steep (7019: 46 deg for 39, 407: 49
+    for 31). Beyond 45 deg the axis nearer the box's was taken, the minor one, and the template turned 90 deg (its
+    vertical along the wings: the size range then reads the aircraft tens of metres off all the way in). Between 45
+    deg and start_steep_deg a span read steep and a fuselage leaning the other way look alike: no re-fit, counted,
+    the level box kept (wider than tall, not turned); with the rule off (45) the re-fitted template is taller than
+    wide and turned the other way."""
+    import dataclasses  # noqa: PLC0415
+
+    import aircraft_docking_tracker.docking.ispf as ispf  # noqa: PLC0415
+
+    def ten_degrees_steep(*args, **kwargs):
+        found = start_silhouette(*args, **kwargs)
+        return None if found is None else dataclasses.replace(
+            found, axis_angle=found.axis_angle + np.sign(found.axis_angle) * np.deg2rad(10.0))
+
+    monkeypatch.setattr(ispf, "start_silhouette", ten_degrees_steep)
+    frames, box = aircraft_frames(degrees, np.random.default_rng(0), n=7)
+
+    def start(**cfg):
+        tracker = DockingTracker(DockingConfig(seed=0, **cfg))
+        tracker.start(frames[0], ag.to_box(box))
+        for frame in frames[1:]:
+            result = tracker.step(frame)
+        params = ag.to_params(result.matrix[None])[0]
+        return {k for k, v in tracker.filter.start_counts.items() if v}, params[3], np.rad2deg(params[4])
+
+    counts, aspect, turn = start()
+    assert counts == {"steep"} and aspect > 1.0 and abs(turn) < 15.0
+    counts, aspect, turn = start(start_steep_deg=45.0)
+    assert counts == {"refitted"} and aspect < 1.0 and np.sign(turn) != np.sign(degrees)

@@ -334,6 +334,14 @@ class FilterConfig(AppearanceConfig):
                                           "tracker seed, and the track never levelled; refused, all 9 runs showed STOP "
                                           "within 0.5 m; on 177 other approaches it never acts); 0: off",
                                           low=0.0, high=100.0)
+    start_steep_deg: float = param(60.0, "start_refit: no re-fit when the start silhouette's major axis lies between "
+                                   "45 deg and this many deg from level (counted steep): there a span read too steep "
+                                   "and a fuselage leaning the other way look alike. Of the 140 guidance approaches 10 "
+                                   "read 45-56 deg: 9 spans turned 24-39 deg the same way (rain, a thin wing's hull), "
+                                   "taken for the fuselage and the template turned 90 deg (407 and 7019, every tracker "
+                                   "seed: no STOP, figures 30-110 m off), and one fuselage (6001); 4 read 64-86 deg, "
+                                   "none a span. With the level box kept all 9 runs of 407, 7019 and 6001 show STOP "
+                                   "within 0.5 m; 45: off", low=45.0, high=90.0)
     start_axis: str = param("hull", "start_refit: the start silhouette's axis. hull: on the frames (at most "
                             "start_width px wide, in colour when the frames are BGR), the principal axis of the convex "
                             "hull of the silhouette's largest piece (the wing tips and the fin set it, not the filled "
@@ -495,7 +503,7 @@ class AffineParticleFilter:
         # start_refit: (frame as given, grey or BGR; X̂; whether the model learnt X̂'s patch) since the start
         self._start_track: list[tuple[np.ndarray, np.ndarray | None, bool]] = []
         self.start_counts = {"refitted": 0, "no silhouette": 0, "hidden": 0, "no axis": 0, "outside": 0,
-                             "moved": 0, "untrusted": 0, "invalid": 0, "disagree": 0}
+                             "moved": 0, "untrusted": 0, "invalid": 0, "disagree": 0, "steep": 0}
         self._still_run = 0                 # frames in a row the target was still (extent_still_after)
         self._shaped = False                # learn_rotation shaped: the track started on the target's rotation
         self.extent_counts = {"measured": 0, "moving": 0, "untrusted": 0, "filling": 0, "still": 0, "none": 0,
@@ -935,7 +943,8 @@ class AffineParticleFilter:
         a moving camera or a foreground not trusted on this frame, X̂ moved more than ``start_max_motion`` box
         sizes (``moved``: the silhouette would be the target's trail), no silhouette, an aircraft hidden
         (``start_min_fill``), no axis (elongation below ``start_min_elongation``), too much moving outside
-        (``start_max_outside``: rain, a moving camera), no rectangle of positive sides fits the box, sides fitted in
+        (``start_max_outside``: rain, a moving camera), an axis 45 deg to ``start_steep_deg`` from level
+        (``steep``: a span read too steep or a leaning fuselage), no rectangle of positive sides fits the box, sides fitted in
         the box more than ``start_max_disagreement`` times as elongated as the silhouette (``disagree``: an axis read
         a few degrees too steep near 40 deg), or the re-fitted state is not a valid one
         (``invalid``)."""
@@ -967,6 +976,9 @@ class AffineParticleFilter:
             self.start_counts["no axis"] += 1
             return None
         angle, aspect = silhouette.axis_angle, silhouette.elongation
+        if np.pi / 4 < abs(angle) <= np.deg2rad(cfg.start_steep_deg):   # a span read steep, or the fuselage?
+            self.start_counts["steep"] += 1
+            return None
         if abs(angle) > np.pi / 4:                # the box's u axis is nearer the silhouette's minor axis
             angle -= np.sign(angle) * np.pi / 2
             aspect = 1.0 / aspect
