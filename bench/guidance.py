@@ -386,7 +386,7 @@ def markdown(payload: dict, approaches: list[dict]) -> list[str]:
                                              if k not in ("stand_file", "aircraft_type")), "",
           "| measure | target | measured (mean over runs / median / worst run) |", "|---|---|---|",
           f"| lateral and distance errors within the last 15 m, p95 of every frame of every run | <= 0.25 / 0.5 m | "
-          f"{s['lateral_p95_pooled']:.2f} / {s['distance_p95_pooled']:.2f} m |",
+          f"{s['lateral_p95_pooled']:.3f} / {s['distance_p95_pooled']:.3f} m |",
           f"| lateral error within the last 15 m, p95 | <= 0.25 m | {s['lateral_p95_mean']:.2f} / "
           f"{s['lateral_p95_median']:.2f} / {s['lateral_p95_worst']:.2f} m (median error {s['lateral_p50_median']:.2f} m); "
           f"met on {s['runs_lateral_met']} of {s['runs']} runs |",
