@@ -944,10 +944,9 @@ class AffineParticleFilter:
         sizes (``moved``: the silhouette would be the target's trail), no silhouette, an aircraft hidden
         (``start_min_fill``), no axis (elongation below ``start_min_elongation``), too much moving outside
         (``start_max_outside``: rain, a moving camera), an axis 45 deg to ``start_steep_deg`` from level
-        (``steep``: a span read too steep or a leaning fuselage), no rectangle of positive sides fits the box, sides fitted in
-        the box more than ``start_max_disagreement`` times as elongated as the silhouette (``disagree``: an axis read
-        a few degrees too steep near 40 deg), or the re-fitted state is not a valid one
-        (``invalid``)."""
+        (``steep``: a span read too steep or a leaning fuselage), no rectangle of positive sides fits the box, sides
+        fitted in the box more than ``start_max_disagreement`` times as elongated as the silhouette (``disagree``: an
+        axis read a few degrees too steep near 40 deg), or the re-fitted state is not a valid one (``invalid``)."""
         cfg, box = self.config, self._start_box
         if not self._static_camera or self.background.foreground is None:
             self.start_counts["untrusted"] += 1
