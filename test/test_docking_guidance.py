@@ -423,7 +423,7 @@ def test_an_aircraft_standing_at_its_mark_behind_a_long_figure_is_shown_stop(sce
         states = [guidance.update(quad, True, False, stamp) for quad, _, stamp, _ in frames]
         assert abs(states[-1].distance_m - long_m) < 0.1                    # the figure at the stand reads long
         first = next((i for i, r in enumerate(states) if r.state == STOP), None)
-        assert guidance.halted_stops == (first is not None and long_m > 0.25)    # counted for the diagnostics
+        assert guidance.halted_stops == (first is not None and long_m > guidance.config.stop_m)   # diagnostics
         return first
 
     assert first_stop(0.0) < standing_from                                  # a true figure: STOP while it closes

@@ -115,9 +115,11 @@ class GuidanceConfig:
                              "the smoothing", low=0.0, high=3600.0)
     slow_down_m: float = param(15.0, "slow down shown within this distance of the stop mark [m]", low=0.0,
                                high=1000.0)
-    stop_m: float = param(0.25, "STOP shown once the distance to go is at or below this [m] (inside the +-0.5 m an "
-                          "advanced VDGS stops to: a figure a tenth of a metre long at the mark still shows STOP)",
-                          low=-10.0, high=10.0)
+    stop_m: float = param(0.15, "STOP shown once the distance to go is at or below this [m] (inside the +-0.5 m an "
+                          "advanced VDGS stops to: a figure a tenth of a metre long at the mark still shows STOP; "
+                          "longer ones have halted_stop_m). 0.25 until session 31: stands whose survey reads short "
+                          "then showed STOP 0.55-1.07 m early (fresh 7010, 7012, 8019); 0.15 changed no other STOP's "
+                          "verdict on 360 runs, 0.1 lost one", low=-10.0, high=10.0)
     stop_release_m: float = param(0.5, "STOP, once shown, holds until the distance is this much above stop_m [m]",
                                   low=0.0, high=100.0)
     overshoot_m: float = param(0.5, "overshoot shown when the nose is more than this past the mark [m]", low=0.0,
