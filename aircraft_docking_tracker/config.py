@@ -221,6 +221,18 @@ def package_config_dir() -> Path:
     return Path(__file__).resolve().parent.parent / "config"
 
 
+TRUE_WORDS, FALSE_WORDS = ("1", "true", "yes", "on"), ("0", "false", "no", "off")
+
+
+def parse_bool(text: str) -> bool:
+    """A boolean option's value: 1 / true / yes / on or 0 / false / no / off (any case); anything else is a
+    ValueError (argparse reports it as an invalid value)."""
+    word = text.strip().lower()
+    if word not in TRUE_WORDS + FALSE_WORDS:
+        raise ValueError(f"{text!r} is not a boolean ({'/'.join(TRUE_WORDS)} or {'/'.join(FALSE_WORDS)})")
+    return word in TRUE_WORDS
+
+
 def add_config_arguments(parser, cls: type, prefix: str = "") -> None:
     """Add one ``--name`` option per config field to an argparse parser (offline tools)."""
     for f in dataclasses.fields(cls):
@@ -230,7 +242,7 @@ def add_config_arguments(parser, cls: type, prefix: str = "") -> None:
         description = spec.description.replace("%", "%%")  # argparse formats help with %
         kind = type(default)
         if isinstance(default, bool):
-            parser.add_argument(opt, type=lambda s: s.lower() in ("1", "true", "yes", "on"), default=None,
+            parser.add_argument(opt, type=parse_bool, default=None,
                                 metavar="BOOL", help=f"{description} (default {default})")
         elif kind in (int, float, str):
             parser.add_argument(opt, type=kind, default=None, choices=spec.choices,

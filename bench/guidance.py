@@ -309,12 +309,13 @@ def tune(approaches: list[dict]) -> tuple[dict, list]:
 
 
 def _constant(default, text: str):
-    """``--set``'s value in its default's type (a boolean from true/false, 1/0, on/off)."""
-    if isinstance(default, bool):
-        if text.lower() not in ("true", "false", "1", "0", "on", "off"):
-            raise SystemExit(f"--set: {text!r} is not a boolean")
-        return text.lower() in ("true", "1", "on")
-    return type(default)(text)
+    """``--set``'s value in its default's type (a boolean by ``config.parse_bool``)."""
+    from aircraft_docking_tracker.config import parse_bool  # noqa: PLC0415
+
+    try:
+        return parse_bool(text) if isinstance(default, bool) else type(default)(text)
+    except ValueError as error:
+        raise SystemExit(f"--set: {error}") from None
 
 
 def main() -> int:
@@ -337,6 +338,7 @@ def main() -> int:
     WORKERS = args.workers
     from aircraft_docking_tracker.docking.guidance import GuidanceConfig  # noqa: PLC0415
 
+    overrides = {k: _constant(getattr(GuidanceConfig(), k), v) for k, v in (s.split("=", 1) for s in args.set)}
     seed0 = args.first_seed if args.first_seed is not None else TUNE_SEED0 if args.tune else HELD_OUT_SEED0
     cache = args.cache or Path(tempfile.mkdtemp(prefix="guidance_"))
     cache.mkdir(parents=True, exist_ok=True)
@@ -344,7 +346,6 @@ def main() -> int:
     jobs = [(seed0 + k, k, args.frames, args.seeds, str(cache)) for k in range(args.approaches)]
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
         done = list(pool.imap_unordered(track_approach, jobs))
-    overrides = {k: _constant(getattr(GuidanceConfig(), k), v) for k, v in (s.split("=", 1) for s in args.set)}
     paths = sorted(d["path"] for d in done)
     gear_config = {k: v for k, v in asdict(replace(GuidanceConfig(), **overrides)).items()
                    if k in GEAR_KEYS or k in ("stand_file", "aircraft_type")}

@@ -6,7 +6,7 @@ import pytest
 
 from aircraft_docking_tracker.config import (
     ConfigError, add_config_arguments, config_from_arguments, from_mapping, load_yaml_parameters,
-    param, validate)
+    param, parse_bool, validate)
 
 
 @dataclass
@@ -45,6 +45,24 @@ def test_argparse_bridge_overrides_yaml():
     args = parser.parse_args(["--count", "7"])
     cfg = config_from_arguments(Example, args, base={"rate": 0.1})
     assert (cfg.rate, cfg.count, cfg.mode) == (0.1, 7, "seed")
+
+
+def test_boolean_options_read_the_usual_words_and_refuse_others():
+    """parse_bool: what a boolean --option (and bench/guidance.py's --set) takes; a typo is refused, not read as
+    False."""
+    assert [parse_bool(w) for w in ("1", "True", "yes", "ON", "0", "false", "No", "off")] == [True] * 4 + [False] * 4
+    with pytest.raises(ValueError):
+        parse_bool("flase")
+
+    @dataclass
+    class Switch:
+        on: bool = param(False, "a switch")
+
+    parser = argparse.ArgumentParser()
+    add_config_arguments(parser, Switch)
+    assert parser.parse_args(["--on", "true"]).on is True
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--on", "maybe"])
 
 
 def test_split_ros_args_keeps_tool_remaps_away_from_rcl():

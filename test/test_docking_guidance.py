@@ -236,6 +236,13 @@ def test_nose_wheel_not_measured_where_it_cannot_be(stop_frames):
     assert not never.measure(frame.quad, never.measure_gear(frame.image, frame.quad))[0].gear_measured
 
 
+def _contact(stand, nose_ground) -> np.ndarray:
+    """A nose-wheel row measured exactly where ``nose_ground`` (on the apron) projects."""
+    gear = np.full(1, np.nan, NOSE_GEAR_DTYPE)
+    gear["axis_x"], gear["axis_y"] = gear["ground_x"], gear["ground_y"] = stand.camera.project([[*nose_ground, 0.0]])[0]
+    return gear
+
+
 def test_nose_gear_setback_puts_the_nose_ahead_of_the_wheel(scene, frames):
     """A wheel measured where a nose 2 m ahead of it would put it: the nose is 2 m nearer the mark."""
     data = scene.stand_calibration(click_sigma_px=0.0)
@@ -243,10 +250,7 @@ def test_nose_gear_setback_puts_the_nose_ahead_of_the_wheel(scene, frames):
     data["aircraft"]["synthetic_a320"]["nose_gear_setback_m"] = 2.0
     setback = parse_stand(data)
     quad, truth, _, nose_ground = frames[300]
-    contact = stand.camera.project([[*nose_ground, 0.0]])[0]
-    gear = np.full(1, np.nan, NOSE_GEAR_DTYPE)
-    gear["axis_x"], gear["axis_y"] = contact
-    gear["ground_x"], gear["ground_y"] = contact
+    gear = _contact(stand, nose_ground)
     exact = DockingGuidance(stand, GuidanceConfig(size_sigma=1.0)).measure(quad, gear)[0]
     ahead = DockingGuidance(setback, GuidanceConfig(size_sigma=1.0)).measure(quad, gear)[0]
     assert exact.distance_m == pytest.approx(truth[0], abs=0.1)
@@ -260,10 +264,7 @@ def test_a_contact_far_from_the_size_range_is_refused(scene, frames):
     stand = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
     i = int(np.argmin([abs(truth[0] - 25.0) for _, truth, _, _ in frames]))
     quad, truth, _, nose_ground = frames[i]
-    contact = stand.camera.project([[*nose_ground, 0.0]])[0]
-    gear = np.full(1, np.nan, NOSE_GEAR_DTYPE)
-    gear["axis_x"], gear["axis_y"] = contact
-    gear["ground_x"], gear["ground_y"] = contact
+    gear = _contact(stand, nose_ground)
     on_apron = gear.copy()
     on_apron["ground_y"] -= 25.0
     agree = DockingGuidance(stand, GuidanceConfig(gear_agree_sigma=4.0))
@@ -321,13 +322,6 @@ def test_stop_stays_on_when_the_track_breaks_up_at_the_mark(scene, frames):
     assert guidance.rejected >= 10 and set(states) == {STOP}
     assert guidance.update(broken, False, True, stamp + 41 * NS // 14).state == LOST
     assert guidance.update(broken, True, False, stamp + 42 * NS // 14).state != STOP
-
-
-def _contact(stand, nose_ground) -> np.ndarray:
-    """A nose-wheel row measured exactly where ``nose_ground`` (on the apron) projects."""
-    gear = np.full(1, np.nan, NOSE_GEAR_DTYPE)
-    gear["axis_x"], gear["axis_y"] = gear["ground_x"], gear["ground_y"] = stand.camera.project([[*nose_ground, 0.0]])[0]
-    return gear
 
 
 @pytest.mark.parametrize("wheel", [False, True])

@@ -394,9 +394,9 @@ class ConstantVelocityFilter:
         the prediction is returned, or, at rest, the state as it was with its rates zeroed (no time passes for it:
         it neither moves nor grows more uncertain, so the gate does not widen). The rates are held within
         ``max_rate``."""
-        kept = (self.x.copy(), self.P.copy())
+        kept = (self.x.copy(), self.P.copy()) if at_rest else None
         x, taken = self._step(dt, z, r, gate, len(z) if at_rest else 1)
-        if not taken and at_rest:
+        if not taken and kept is not None:
             self.x, self.P = kept
             x = self.hold()
         self.x[:, 1] = np.clip(self.x[:, 1], -max_rate, max_rate)
