@@ -41,7 +41,8 @@ import numpy as np
 from .io.bag import stamp_to_ns
 from .config import param
 from .docking.guidance import (GUIDANCE_STATES, LOST as GUIDANCE_LOST, NO_AIRCRAFT, OVERSHOOT, PARAM_PREFIX as
-                               GUIDANCE_PREFIX, SLOW_DOWN, STOP, DockingGuidance, GuidanceConfig, GuidanceResult)
+                               GUIDANCE_PREFIX, SLOW_DOWN, STOP, DockingGuidance, GuidanceConfig, GuidanceResult,
+                               survey_note)
 from .docking.tracker import LOST, STATE_NAMES, TRACKING, WAITING, DockingConfig, DockingResult, DockingTracker, state_row
 from .ros.node_base import PerceptionNode, run_node
 from .object_table import DETECTION_DTYPE, cloud_to_table, table_to_cloud
@@ -146,6 +147,7 @@ class DockingProcessor(MessageProcessor):
             from .docking.stand import load_stand  # noqa: PLC0415
 
             self.guidance = DockingGuidance(load_stand(guidance.stand_file), guidance)
+            self.start_up_notes = (survey_note(self.guidance),)
         self.last_guidance = GuidanceResult()
         image_type = "sensor_msgs/msg/CompressedImage" if self.node.compressed else "sensor_msgs/msg/Image"
         self.inputs = {"image": image_type, "detections": "sensor_msgs/msg/PointCloud2",
@@ -327,7 +329,9 @@ class DockingProcessor(MessageProcessor):
                            "guidance STOP withheld (figure moving too fast)": self.guidance.stop_withheld,
                            "guidance STOPs for a standing aircraft": self.guidance.halted_stops,
                            "guidance figures held at STOP (measurement not taken)": self.guidance.held_at_stop,
-                           "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name})
+                           "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name,
+                           "survey at the stop mark, along / across the line (95 %) m":
+                               "{:.2f} / {:.2f}".format(*(2 * np.array(self.guidance.survey_sigma_m)))})
         return values
 
 

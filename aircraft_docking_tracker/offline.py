@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +29,8 @@ from typing import Any, Callable, Iterable
 from .io.bag import BagError, BagReader, BagWriter, check_outputs, get_message_class
 from .config import ConfigError, tool_parameters
 from .ros.processing import MessageProcessor, ProcessingStats, ProcessorSpec, process_guarded
+
+LOG = logging.getLogger(__name__)
 
 # node name -> module with a SPEC (ProcessorSpec); the YAML file of each is config/<name>.yaml
 NODE_MODULES = {
@@ -49,7 +52,10 @@ def build_processor(node: str, params_file: str | Path | None = None,
     spec = processor_spec(node)
     parameters = tool_parameters(params_file, f"{node}.yaml", spec.node_name)
     parameters.update(overrides or {})
-    return spec.build(spec.configs_from_parameters(parameters))
+    processor = spec.build(spec.configs_from_parameters(parameters))
+    for level, note in processor.start_up_notes:
+        LOG.log(level, note)
+    return processor
 
 
 @dataclass

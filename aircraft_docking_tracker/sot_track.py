@@ -35,7 +35,7 @@ from tqdm import tqdm
 
 from .config import ConfigError, add_config_arguments, config_from_arguments, tool_parameters
 from .io.bag import check_outputs
-from .docking.guidance import PARAM_PREFIX as GUIDANCE_PREFIX, GuidanceConfig
+from .docking.guidance import PARAM_PREFIX as GUIDANCE_PREFIX, GuidanceConfig, survey_note
 from .docking.tracker import LOST, TRACKING, DockingConfig, DockingTracker
 from .geometry import quad_to_box
 
@@ -304,6 +304,8 @@ def main(argv=None) -> int:
             frames = (f for i, f in zip(range(args.max_frames), frames))
             count = min(count or args.max_frames, args.max_frames)
         guidance, stamps = guidance_for(guided, seq.stamps, args.fps)
+        if guidance is not None:
+            print(f"sot_track: {survey_note(guidance)[1]}", file=sys.stderr)
         run = track(frames, init, config, count, progress=not args.no_progress, guidance=guidance, stamps=stamps)
     except (ConfigError, ValueError, OSError) as exc:
         print(f"sot_track: {exc}", file=sys.stderr)

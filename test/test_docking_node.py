@@ -227,6 +227,10 @@ def test_guidance_outputs_with_a_stand_file(tmp_path):
     panel = np.frombuffer(bytes(out["docking/image"].data), np.uint8).reshape(240, 320, 3)[8:40, -100:]
     assert (panel < 30).mean() > 0.5                                          # the dark panel, top right
     assert proc.status()["guidance state"] == "tracking"
+    along, across = map(float, proc.status()["survey at the stop mark, along / across the line (95 %) m"].split(" / "))
+    assert 0 < across < along < 1.0                        # half-pixel clicks: tenths of a metre along the line
+    (level, note), = proc.start_up_notes                   # logged once by the node at start-up
+    assert f"+-{along:.2f} m along the lead-in line" in note
     proc.reset()
     assert proc.last_guidance.state == 0
     (tmp_path / "broken.yaml").write_text("camera: {image_size: [320, 240], points: []}\n")

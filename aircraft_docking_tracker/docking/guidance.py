@@ -72,6 +72,7 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
 """
 from __future__ import annotations
 
+import logging
 from collections import deque
 from dataclasses import dataclass, field, replace
 
@@ -274,6 +275,37 @@ def stop_bar(line: np.ndarray, stop_m, half_length: float = 3.0) -> np.ndarray:
     return np.array([foot - across, foot + across])
 
 
+#: The survey's error at the stop mark (95 %) above which the start-up note warns [m]: half the +-0.5 m an advanced
+#: VDGS stops to, the rest being the measurement's.
+SURVEY_WARN_M = 0.25
+
+
+def survey_sigma(stand: StandCalibration, point) -> tuple[float, float]:
+    """The survey's error [m, 1 sigma] at the apron ``point`` along the lead-in line and across it: the marks'
+    clicking error propagated through the camera's fit (:meth:`StandCalibration.survey_covariance`), projected on
+    the line's direction there. It is a bias: the same on every approach to the stand."""
+    covariance = stand.survey_covariance(point)
+    along = _direction(stand.lead_in, _nearest_segment(stand.lead_in, point)[0])
+    across = np.array([-along[1], along[0]])
+    return float(np.sqrt(along @ covariance @ along)), float(np.sqrt(across @ covariance @ across))
+
+
+def survey_note(guidance: DockingGuidance) -> tuple[int, str]:
+    """What the stand's survey allows, once at start-up: (logging level, text); a warning when the stop mark's
+    distance is surveyed no better than ``SURVEY_WARN_M`` (95 %)."""
+    stand, along, across = guidance.stand, *guidance.survey_sigma_m
+    if not np.isfinite(along):
+        return logging.WARNING, f"stand {stand.name!r}: the survey's error at the stop mark cannot be told"
+    text = (f"stand {stand.name!r}, {guidance.aircraft.name}: the survey puts the stop mark to +-{2 * along:.2f} m "
+            f"along the lead-in line and +-{2 * across:.2f} m across (95 %; the marks' residuals, "
+            f"{stand.reprojection_px:.2f} px RMS, read as {stand.click_sigma_px:.2f} px a click)")
+    if 2 * along <= SURVEY_WARN_M:
+        return logging.INFO, text
+    return logging.WARNING, (text + f": more than {SURVEY_WARN_M:g} m, half of the +-0.5 m an advanced VDGS stops "
+                             "to; the distance to go can be that far off on every approach. Add marks near the stop "
+                             "and click them to a fraction of a pixel (README, Calibrating a stand)")
+
+
 def fuse_depths(depths, sigmas) -> tuple[float, float]:
     """Inverse-variance fusion of depth estimates (NaN ones left out): (depth, its sigma); NaN if none."""
     depths, sigmas = np.asarray(depths, np.float64), np.asarray(sigmas, np.float64)
@@ -441,6 +473,7 @@ class DockingGuidance:
         self.aircraft = stand.aircraft_type(self.config.aircraft_type or next(iter(stand.aircraft)))
         self.stop_arc = along_line(stand.lead_in, self.aircraft.stop_m)[0]
         self.stop_bar = stop_bar(stand.lead_in, self.aircraft.stop_m)
+        self.survey_sigma_m = survey_sigma(stand, self.aircraft.stop_m)
         self.filter = ConstantVelocityFilter(2, self.config.accel_sigma)
         self.last_stamp_ns: int | None = None
         self.showing_stop = False

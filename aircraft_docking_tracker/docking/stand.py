@@ -4,10 +4,12 @@ A stand file (``config/stands/*.yaml``, documented there) holds what a surveyor 
 
 * **camera**: ``image_size``, optionally ``focal_px`` (square pixels) and ``principal_point``, and at
   least 4 **apron marks**, each an image point [px] with its stand coordinates [m] on the apron (z = 0).
-  The camera's pose comes from the marks (``cv2.solvePnP``, planar). Without ``focal_px`` the focal
-  length is estimated from the marks' ground-plane homography (Zhang's orthogonality constraints
-  with square pixels and the principal point known: the image centre unless given) -- the usual
-  single-view calibration; a measured focal length is better and is used when given.
+  The camera's pose comes from the marks (``cv2.solvePnP``, planar, refined to least squares). Without
+  ``focal_px`` the focal length is estimated from the marks' ground-plane homography (Zhang's orthogonality
+  constraints with square pixels and the principal point known: the image centre unless given) -- the usual
+  single-view calibration; a measured focal length is better and is used when given. The marks' residuals
+  tell how precisely they were clicked, and :meth:`StandCalibration.survey_covariance` carries that through the
+  fit to any apron point: the bias the survey leaves there on every approach.
 * **lead_in**: the lead-in line as a polyline [m], in the order the aircraft drives it (entry first).
 * **aircraft**: per type, the stop mark (a point [m] on or near the line; the distance to go is measured
   along the line to its foot), the nose height above the apron [m], the tracked template's height
@@ -94,6 +96,20 @@ class StandCalibration:
     lead_in: np.ndarray                # (M, 2) [m], entry first
     aircraft: dict                     # name -> AircraftType
     reprojection_px: float             # RMS reprojection error of the apron marks
+    marks: ApronMarks | None = None    # the surveyed marks the camera was fitted to
+
+    @property
+    def click_sigma_px(self) -> float:
+        """The marks' clicking error [px, 1 sigma] that their residuals imply (NaN: too few marks to tell)."""
+        return self.marks.click_sigma_px(self.reprojection_px) if self.marks is not None else float("nan")
+
+    def survey_covariance(self, point) -> np.ndarray:
+        """The 2x2 covariance [m^2] the survey leaves on the apron ``point`` [m] (:meth:`ApronMarks.covariance` at
+        :attr:`click_sigma_px`); NaN if it cannot be told."""
+        sigma = self.click_sigma_px
+        if self.marks is None or not np.isfinite(sigma):
+            return np.full((2, 2), np.nan)
+        return self.marks.covariance(point, sigma)
 
     def aircraft_type(self, name: str) -> AircraftType:
         if name not in self.aircraft:
@@ -141,57 +157,118 @@ def _positive(table: dict, key: str, path: str) -> float:
     return float(value)
 
 
-def calibrate_camera(table: dict) -> tuple[StandCamera, float]:
-    """The ``camera`` section -> (camera, RMS reprojection error of its marks [px])."""
+@dataclass(frozen=True)
+class ApronMarks:
+    """The surveyed apron marks and what the camera's fit takes from the stand file besides them."""
+
+    ground: np.ndarray                 # (N, 2) stand coordinates [m], on the apron
+    image: np.ndarray                  # (N, 2) where they were clicked in the image [px]
+    image_size: np.ndarray             # (2,) [px]
+    principal_point: np.ndarray        # (2,) [px]
+    focal_px: float                    # the measured focal length [px]; 0: estimated from the marks
+
+    def camera(self, image: np.ndarray | None = None) -> StandCamera:
+        """The camera that sees the marks at ``image`` (default: where they were clicked): the focal length given,
+        or from their ground-plane homography, and the pose by ``cv2.solvePnP`` (planar, IPPE), refined to the
+        least-squares reprojection error."""
+        image = self.image if image is None else image
+        H, _ = cv2.findHomography(self.ground, image, 0)
+        if H is None:
+            raise ConfigError("camera.points: the apron marks lie on one line; they must span the apron",
+                              ("camera.points",))
+        focal = self.focal_px
+        if focal == 0:
+            focal = focal_from_homography(H, self.principal_point)
+            if not np.isfinite(focal):
+                raise ConfigError("camera.focal_px: cannot be estimated from these marks (the camera looks square "
+                                  "onto the stand axes); give the measured focal length", ("camera.focal_px",))
+        K = np.array([[focal, 0.0, self.principal_point[0]], [0.0, focal, self.principal_point[1]], [0.0, 0.0, 1.0]])
+        ok, rvec, tvec = cv2.solvePnP(self.on_apron, image, K, None, flags=cv2.SOLVEPNP_IPPE)
+        if not ok:
+            raise ConfigError("camera.points: no camera pose fits these apron marks", ("camera.points",))
+        # IPPE solves from the homography; Levenberg-Marquardt then takes it to the least-squares pose, whose
+        # residuals tell the clicks' error (IPPE's read it 10-25 % high; the stop mark's place moves by < 0.01 m)
+        rvec, tvec = cv2.solvePnPRefineLM(self.on_apron, image, K, None, rvec, tvec)
+        R = cv2.Rodrigues(rvec)[0]
+        centre = (-R.T @ tvec).ravel()
+        if centre[2] <= 0:           # IPPE's planar ambiguity: the mirror pose below the apron
+            raise ConfigError("camera.points: the pose found puts the camera below the apron; check the marks",
+                              ("camera.points",))
+        return StandCamera(K, R, centre, self.image_size)
+
+    @property
+    def on_apron(self) -> np.ndarray:
+        """The marks as stand points (N, 3) [m], z = 0."""
+        return np.c_[self.ground, np.zeros(len(self.ground))]
+
+    def reprojection_px(self, camera: StandCamera) -> float:
+        """RMS distance [px] between where ``camera`` sees the marks and where they were clicked."""
+        return float(np.sqrt(np.mean(np.sum((camera.project(self.on_apron) - self.image) ** 2, axis=1))))
+
+    def click_sigma_px(self, reprojection_px: float) -> float:
+        """The clicking error [px, 1 sigma per coordinate] the marks' residuals imply: their RMS distance times
+        sqrt(N / (2N - p)), p = 6 pose parameters (7 with the focal length estimated: the fit takes p of the 2N
+        coordinates' freedom); NaN with too few marks to tell (2N <= p)."""
+        parameters = 6 if self.focal_px else 7
+        n = len(self.ground)
+        return float(reprojection_px * np.sqrt(n / (2 * n - parameters))) if 2 * n > parameters else float("nan")
+
+    def covariance(self, point, sigma_px: float, step_px: float = 0.05) -> np.ndarray:
+        """The 2x2 covariance [m^2] of where the fitted camera puts the apron ``point`` [m] (x, y), from clicks
+        each ``sigma_px`` off (independent): Sigma = sigma^2 J^T J, J the derivative, by each of the marks' 2N image
+        coordinates, of the apron point that the camera fitted to the moved marks sees at ``point``'s pixel
+        (central differences of ``step_px``; first-order propagation through the fit). It is the bias a survey
+        leaves on every figure measured near ``point``: no smoothing removes it."""
+        pixel = self.camera().project([[float(point[0]), float(point[1]), 0.0]])
+
+        def apron_at(image: np.ndarray) -> np.ndarray:
+            camera = self.camera(image)
+            return camera.point_at_depth(pixel, camera.depth_on_plane(pixel, 0.0))[0, :2]
+
+        jacobian = np.empty((self.image.size, 2))
+        for k in range(self.image.size):
+            step = np.zeros(self.image.size)
+            step[k] = step_px
+            step = step.reshape(self.image.shape)
+            jacobian[k] = (apron_at(self.image + step) - apron_at(self.image - step)) / (2 * step_px)
+        return sigma_px ** 2 * jacobian.T @ jacobian
+
+
+def calibrate_camera(table: dict) -> tuple[StandCamera, float, ApronMarks]:
+    """The ``camera`` section -> (camera, RMS reprojection error of its marks [px], the marks)."""
     if not isinstance(table, dict):
         raise ConfigError("camera: needs a mapping (image_size, points, optional focal_px, principal_point)",
                           ("camera",))
     size = _points(table.get("image_size"), "camera.image_size", 1)[0]
     if (size < 1).any():
         raise ConfigError(f"camera.image_size: {size.tolist()} is not a size", ("camera.image_size",))
-    marks = table.get("points")
-    if not isinstance(marks, list) or len(marks) < 4:
+    points = table.get("points")
+    if not isinstance(points, list) or len(points) < 4:
         raise ConfigError("camera.points: needs at least 4 apron marks {image: [u, v], stand: [x, y]}",
                           ("camera.points",))
     image = np.array([_points(m.get("image") if isinstance(m, dict) else None, f"camera.points[{i}].image", 1)[0]
-                      for i, m in enumerate(marks)])
-    ground = np.array([_points(m.get("stand"), f"camera.points[{i}].stand", 1)[0] for i, m in enumerate(marks)])
+                      for i, m in enumerate(points)])
+    ground = np.array([_points(m.get("stand"), f"camera.points[{i}].stand", 1)[0] for i, m in enumerate(points)])
     principal = (_points(table["principal_point"], "camera.principal_point", 1)[0]
                  if table.get("principal_point") is not None else size / 2.0)
-    H, _ = cv2.findHomography(ground, image, 0)
     spread = np.linalg.svd(ground - ground.mean(axis=0), compute_uv=False)
-    if H is None or spread[1] < 1e-3 * max(spread[0], 1e-9):
+    if spread[1] < 1e-3 * max(spread[0], 1e-9):
         raise ConfigError("camera.points: the apron marks lie on one line; they must span the apron",
                           ("camera.points",))
     focal = table.get("focal_px") or 0.0
     if not isinstance(focal, (int, float)) or isinstance(focal, bool) or not np.isfinite(focal) or focal < 0:
         raise ConfigError(f"camera.focal_px: needs a positive number (or 0: estimate it), got {focal!r}",
                           ("camera.focal_px",))
-    if focal == 0:
-        focal = focal_from_homography(H, principal)
-        if not np.isfinite(focal):
-            raise ConfigError("camera.focal_px: cannot be estimated from these marks (the camera looks square "
-                              "onto the stand axes); give the measured focal length", ("camera.focal_px",))
-    K = np.array([[focal, 0.0, principal[0]], [0.0, focal, principal[1]], [0.0, 0.0, 1.0]])
-    object_points = np.c_[ground, np.zeros(len(ground))]
-    ok, rvec, tvec = cv2.solvePnP(object_points, image, K, None, flags=cv2.SOLVEPNP_IPPE)
-    if not ok:
-        raise ConfigError("camera.points: no camera pose fits these apron marks", ("camera.points",))
-    R = cv2.Rodrigues(rvec)[0]
-    centre = (-R.T @ tvec).ravel()
-    if centre[2] <= 0:           # IPPE's planar ambiguity: the mirror pose below the apron
-        raise ConfigError("camera.points: the pose found puts the camera below the apron; check the marks",
-                          ("camera.points",))
-    camera = StandCamera(K, R, centre, size)
-    error = float(np.sqrt(np.mean(np.sum((camera.project(object_points) - image) ** 2, axis=1))))
-    return camera, error
+    marks = ApronMarks(ground, image, size, principal, float(focal))
+    camera = marks.camera()
+    return camera, marks.reprojection_px(camera), marks
 
 
 def parse_stand(data: dict, name: str = "stand") -> StandCalibration:
     """A stand file's mapping -> :class:`StandCalibration` (every field checked)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{name}: a stand file holds a mapping (camera, lead_in, aircraft)", ())
-    camera, error = calibrate_camera(data.get("camera"))
+    camera, error, marks = calibrate_camera(data.get("camera"))
     lead_in = _points(data.get("lead_in"), "lead_in")
     if len(lead_in) < 2 or np.linalg.norm(np.diff(lead_in, axis=0), axis=1).min() <= 0:
         raise ConfigError("lead_in: needs at least 2 distinct points [m], entry first", ("lead_in",))
@@ -216,7 +293,7 @@ def parse_stand(data: dict, name: str = "stand") -> StandCalibration:
             str(type_name), _points(entry.get("stop_m"), f"{path}.stop_m", 1)[0],
             _positive(entry, "nose_height_m", path), _positive(entry, "height_m", path),
             _positive(entry, "wingspan_m", path), nose, float(setback))
-    return StandCalibration(str(data.get("stand", name)), camera, lead_in, aircraft, error)
+    return StandCalibration(str(data.get("stand", name)), camera, lead_in, aircraft, error, marks)
 
 
 def load_stand(path: str | Path) -> StandCalibration:

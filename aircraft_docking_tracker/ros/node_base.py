@@ -35,6 +35,7 @@ from __future__ import annotations
 import array
 import copy
 import dataclasses
+import logging
 import os
 import sys
 import threading
@@ -294,6 +295,8 @@ class PerceptionNode(Node):
         if processor.warm_up_error:
             self.get_logger().warning(f"warm-up failed ({processor.warm_up_error}): the first frame loads the "
                                       "compiled kernels instead")
+        for level, note in processor.start_up_notes:
+            (self.get_logger().warning if level >= logging.WARNING else self.get_logger().info)(note)
         processor.on_rejected = self.reject
         processor.on_event = self.time_jumped
         for topic, type_name in processor.outputs.items():

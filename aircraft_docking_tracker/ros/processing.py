@@ -63,6 +63,8 @@ class MessageProcessor:
 
     #: Why :meth:`warm_up` failed ("" when it ran or there is nothing to warm up); the live node logs it.
     warm_up_error: str = ""
+    #: What the user should read once at start-up, as (logging level, text); the live node logs it.
+    start_up_notes: tuple[tuple[int, str], ...] = ()
 
     def warm_up(self) -> None:
         """Run :meth:`warm_up_work` before the node subscribes: compiled kernels load (or compile, on a fresh
