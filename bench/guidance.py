@@ -153,12 +153,13 @@ def measure_gears(job: tuple) -> str:
     return str(out)
 
 
-def guide(approach: dict, run: int, config) -> dict:
-    """The guidance over one tracked run: a ``GUIDANCE_DTYPE`` row per frame, and its mean time per frame."""
+def guide(approach: dict, run: int, config, exact_survey: bool = False) -> dict:
+    """The guidance over one tracked run: a ``GUIDANCE_DTYPE`` row per frame, and its mean time per frame; with
+    ``exact_survey`` on the stand's exact calibration instead of the surveyor's (the method's own error)."""
     from aircraft_docking_tracker.docking.guidance import DockingGuidance, guide_track  # noqa: PLC0415
     from aircraft_docking_tracker.docking.tracker import LOST, TRACKING  # noqa: PLC0415
 
-    guidance = DockingGuidance(approach["stand"], config)
+    guidance = DockingGuidance(approach["stand_exact" if exact_survey else "stand"], config)
     states = approach["states"][run]
     t0 = time.perf_counter()
     gears = approach["gears"][run] if approach.get("gears") is not None else None
@@ -217,6 +218,20 @@ def drawn_distances(scene, stand_exact) -> np.ndarray:
     return np.array(out)
 
 
+def survey_at_stop(stand, stand_exact) -> dict:
+    """The surveyor's calibration at the stop mark: its error along the lead-in line (where it puts the apron point
+    the exact camera sees at the mark, minus the mark: + reads long) and the 95 % the stand's own marks predict
+    (``guidance.survey_sigma``, from their residuals alone)."""
+    from aircraft_docking_tracker.docking.guidance import along_line, survey_sigma  # noqa: PLC0415
+
+    aircraft = stand.aircraft_type(next(iter(stand.aircraft)))
+    pixel = stand_exact.camera.project([[*aircraft.stop_m, 0.0]])
+    seen = stand.camera.point_at_depth(pixel, stand.camera.depth_on_plane(pixel, 0.0))[0, :2]
+    stop_arc = along_line(stand.lead_in, aircraft.stop_m)[0]
+    return {"error_m": float(stop_arc - along_line(stand.lead_in, seen)[0]),
+            "predicted95_m": 2 * survey_sigma(stand, aircraft.stop_m)[0]}
+
+
 def load(paths: list[str]) -> list[dict]:
     """The cached tracked runs, each with its stand's calibration (the file made anew, as a surveyor would: it needs
     no rendering; read once here, not per run)."""
@@ -232,16 +247,18 @@ def load(paths: list[str]) -> list[dict]:
         frames = len(a["stamps"])
         scene = DockingScene(DockingSceneConfig(width=640, height=480, frames=frames, **a["options"]), seed=a["seed"])
         a["stand"] = parse_stand(scene.stand_calibration())
-        a["drawn"] = drawn_distances(scene, parse_stand(scene.stand_calibration(click_sigma_px=0.0)))
+        a["stand_exact"] = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
+        a["drawn"] = drawn_distances(scene, a["stand_exact"])
+        a["survey"] = survey_at_stop(a["stand"], a["stand_exact"])
         out.append(a)
     return out
 
 
-def evaluate(approaches: list[dict], config) -> list[dict]:
+def evaluate(approaches: list[dict], config, exact_survey: bool = False) -> list[dict]:
     rows = []
     for a in approaches:
         for run in range(len(a["quads"])):
-            rows.append({"seed": a["seed"], "run": run, **score(a, guide(a, run, config))})
+            rows.append({"seed": a["seed"], "run": run, **score(a, guide(a, run, config, exact_survey))})
     return rows
 
 
@@ -363,6 +380,10 @@ def main() -> int:
         print("chosen", chosen)
     config = replace(GuidanceConfig(), **overrides)
     rows = evaluate(approaches, config)
+    exact = summary(evaluate(approaches, config, exact_survey=True))
+    payload.update({"exact_survey": {k: exact[k] for k in ("lateral_p95_pooled", "distance_p95_pooled",
+                                                            "runs_distance_met", "runs_lateral_met", "stop_ok")},
+                    "survey": {a["seed"]: a["survey"] for a in approaches}})
     payload.update({"config": asdict(config), "summary": summary(rows),
                     "rows": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
                     "tracker_ms_per_frame": float(np.median(np.concatenate(
@@ -381,6 +402,9 @@ def markdown(payload: dict, approaches: list[dict]) -> list[str]:
     s = payload["summary"]
     near = [a["truth"][:, 0] <= NEAR_M for a in approaches]
     drawn_offset = float(np.median([np.median(a["drawn"][n] - a["truth"][n, 0]) for a, n in zip(approaches, near)]))
+    x = payload["exact_survey"]
+    predicted = [a["survey"]["predicted95_m"] for a in approaches]
+    realised = [abs(a["survey"]["error_m"]) for a in approaches]
     md = [f"## Docking guidance (issue 15): {len(approaches)} synthetic approaches of seeds {payload['first_seed']}.., "
           f"{payload['seeds']} tracker seeds, {payload['frames']} frames at 14 Hz", "",
           "Guidance constants: " + ", ".join(f"{k} {v}" for k, v in payload["config"].items()
@@ -388,6 +412,13 @@ def markdown(payload: dict, approaches: list[dict]) -> list[str]:
           "| measure | target | measured (mean over runs / median / worst run) |", "|---|---|---|",
           f"| lateral and distance errors within the last 15 m, p95 of every frame of every run | <= 0.25 / 0.5 m | "
           f"{s['lateral_p95_pooled']:.3f} / {s['distance_p95_pooled']:.3f} m |",
+          f"| the same on each stand's exact calibration (the method's own share; the survey's is the rest) | - | "
+          f"{x['lateral_p95_pooled']:.3f} / {x['distance_p95_pooled']:.3f} m; per run met on {x['runs_lateral_met']} / "
+          f"{x['runs_distance_met']} of {s['runs']} |",
+          f"| the survey's error at the stop mark along the line (0.5 px clicks): the stands' own 95 % "
+          "(from their marks' residuals) / realised | - | "
+          f"median {np.median(predicted):.2f} / {np.median(realised):.2f} m, largest {np.max(predicted):.2f} / "
+          f"{np.max(realised):.2f} m; beyond 3 sigma on {sum(r > 1.5 * p for r, p in zip(realised, predicted))} |",
           f"| lateral error within the last 15 m, p95 | <= 0.25 m | {s['lateral_p95_mean']:.2f} / "
           f"{s['lateral_p95_median']:.2f} / {s['lateral_p95_worst']:.2f} m (median error {s['lateral_p50_median']:.2f} m); "
           f"met on {s['runs_lateral_met']} of {s['runs']} runs |",
@@ -411,13 +442,16 @@ def markdown(payload: dict, approaches: list[dict]) -> list[str]:
           f"frames the nose wheel is looked for {payload['gear_ms_median']:.2f} ms more (median; p95 "
           f"{payload['gear_ms_p95']:.2f} ms), beside the tracker's {payload['tracker_ms_per_frame']:.1f} ms (the "
           "tracker's timed when the runs were cached, the nose wheel in this run) |", "",
-          "| approach | camera h / d [m] | run | lateral p50 / p95 [m] | distance p50 / p95 [m] | STOP at [m] |",
-          "|---|---|---|---|---|---|"]
+          "| approach | camera h / d [m] | survey at the stop: error / 95 % [m] | run | lateral p50 / p95 [m] | "
+          "distance p50 / p95 [m] | STOP at [m] |",
+          "|---|---|---|---|---|---|---|"]
     options = {a["seed"]: a["options"] for a in approaches}
     for r in payload["rows"]:
         o = options[r["seed"]]
+        survey = payload["survey"][r["seed"]]
         md.append(f"| {r['seed']} {o['weather']}/{o['occluder']} | {o['camera_height_m']:.1f} / "
-                  f"{o['camera_distance_m']:.1f} | {r['run']} | {r['lateral_p50']:.2f} / {r['lateral_p95']:.2f} | "
+                  f"{o['camera_distance_m']:.1f} | {survey['error_m']:+.2f} / {survey['predicted95_m']:.2f} | "
+                  f"{r['run']} | {r['lateral_p50']:.2f} / {r['lateral_p95']:.2f} | "
                   f"{r['distance_p50']:.2f} / {r['distance_p95']:.2f} | {r['stop_at_m']:.2f} |")
     return md
 
