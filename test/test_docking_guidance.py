@@ -265,6 +265,23 @@ def test_nose_wheel_found_despite_a_quadrilateral_off_by_a_third(stop_frames):
     assert with_gear[:, 0].max() < 0.8 and np.median(quad_only[:, 0]) > 2 * np.median(with_gear[:, 0])
 
 
+def test_ground_contact_is_the_tyres_edge_with_a_joint_line_right_under_it():
+    """A grey profile down the axis as measured on a bench stand (415, 12.3 m to go): the tyre (44) ends after
+    row 7, a slab joint (114, 118) runs right under it, then the apron (140-150). The step's bands smear the edge
+    over two rows and their best row lies under the joint; the contact is the tyre's edge, the larger jump."""
+    from aircraft_docking_tracker.docking.nose_gear import ground_contact, tyre_steps
+
+    joint = np.array([108, 52, 44, 44, 45, 45, 45, 44, 114, 118, 140, 150, 150, 149, 144, 121, 150, 150, 150], float)
+    assert int(np.argmax(tyre_steps(joint, 5, 2)[2:15])) + 2 == 9          # the step alone: two rows low
+    contact, step = ground_contact(joint, 2, 14, 5, 2)
+    assert abs(contact - 7.5) < 0.2 and step > 60
+    clean = np.where(np.arange(len(joint)) < 8, joint, 150.0)
+    assert abs(ground_contact(clean, 2, 14, 5, 2)[0] - 7.5) < 0.1
+    stop_bar = clean.copy()
+    stop_bar[8:11] = 230.0                             # a painted stop bar under the tyre: the edge stays the tyre's
+    assert abs(ground_contact(stop_bar, 2, 14, 5, 2)[0] - 7.5) < 0.2
+
+
 def test_nose_wheel_not_measured_where_it_cannot_be(stop_frames):
     scene, stand, frame = stop_frames[-1]
     guidance = DockingGuidance(stand)
