@@ -326,7 +326,7 @@ class DockingProcessor(MessageProcessor):
                            "guidance frames measured at the nose wheel": self.guidance.gear_measured,
                            "guidance nose-wheel contacts refused (far from the size's range)":
                                self.guidance.gear_refused,
-                           "guidance STOP withheld (figure moving too fast)": self.guidance.stop_withheld,
+                           "guidance STOP withheld (figure too fast, or off the line)": self.guidance.stop_withheld,
                            "guidance STOPs for a standing aircraft": self.guidance.halted_stops,
                            "guidance figures held at STOP (measurement not taken)": self.guidance.held_at_stop,
                            "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name,

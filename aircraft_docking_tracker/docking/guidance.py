@@ -50,8 +50,9 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    again), 4 overshoot (more than ``overshoot_m`` past the mark), 5 lost (the tracker lost the aircraft:
    no figure is shown, and the filter starts afresh on the next track). STOP and overshoot need an
    approach: since the filter (re)started it must have followed the nose ``approach_m`` towards the
-   mark, and the figure must move slower than ``arrive_mps`` towards it and ``recede_mps`` away from it (an
-   aircraft reaches its mark at walking pace, and does not back away), else slow down is shown in their place --
+   mark, the figure must move slower than ``arrive_mps`` towards it and ``recede_mps`` away from it (an
+   aircraft reaches its mark at walking pace, and does not back away), and the nose must be within
+   ``stop_lateral_m`` of the lead-in line (a docking nose follows it), else slow down is shown in their place --
    a track that starts on, or restarts onto, something standing near the mark (a vehicle, the jet bridge) shows
    no STOP; slow down must have been shown for
    ``slow_down_min_s`` first, continuously (a tracker that slips between the aircraft and the clutter makes
@@ -155,6 +156,12 @@ class GuidanceConfig:
                               "more than 1 m early (6 runs of 240, one 171 m: one now shows no STOP, the others "
                               "within 0.5 m) and put none outside 0.5 m; the tuning set chose 2; 1000: off",
                               low=0.0, high=1000.0)
+    stop_lateral_m: float = param(3.0, "STOP and overshoot come on only while the nose is within this of the lead-in "
+                                  "line [m]: a docking nose follows the line (every STOP within 0.5 m of the mark on "
+                                  "420 bench runs came 0.40 m or less off it), a track on something standing beside "
+                                  "it need not (with session 32's nose-wheel edge two such tracks showed STOP 19 and "
+                                  "151 m early, 5.9 and 9.8 m off the line; no other run changes); 1000: off",
+                                  low=0.0, high=1000.0)
     halted_stop_m: float = param(0.5, "STOP is also shown for an aircraft standing still within this of the mark [m] "
                                  "(the +-0.5 m an advanced VDGS stops to): a stand surveyed to half a pixel can read "
                                  "its last metres a few tenths long, and an aircraft stood at its mark without STOP "
@@ -481,7 +488,7 @@ class DockingGuidance:
         self.rejected = 0                 # measurements the gate rejected
         self.gear_measured = 0            # frames measured at the nose wheel
         self.gear_refused = 0             # contacts refused: their range disagreed with the size's
-        self.stop_withheld = 0            # frames STOP or overshoot was withheld: the figure moved too fast
+        self.stop_withheld = 0            # frames STOP or overshoot was withheld: too fast, or off the line
         self.halted_stops = 0             # STOPs shown for an aircraft standing still (halted_stop_m)
         self.held_at_stop = 0             # frames under STOP whose measurement was not taken (stop_holds)
         self.last_taken_ns: int | None = None
@@ -602,13 +609,14 @@ class DockingGuidance:
         # and slow down shown long enough; STOP shown stays on until a measurement of a followed approach clears it
         in_zone_s = (stamp_ns - self.slow_since_ns) * 1e-9 if self.slow_since_ns is not None else 0.0
         approached = taken and self.farthest_m - result.distance_m >= cfg.approach_m
-        steady = -cfg.recede_mps <= result.speed_mps <= cfg.arrive_mps
+        steady = (-cfg.recede_mps <= result.speed_mps <= cfg.arrive_mps
+                  and abs(result.lateral_m) <= cfg.stop_lateral_m)
         followed = approached and steady
         result.state = STOP if self.showing_stop and not followed else display_state(
             result.distance_m, self.showing_stop, cfg, followed and in_zone_s >= cfg.slow_down_min_s, halted)
         if (approached and not steady and in_zone_s >= cfg.slow_down_min_s and result.state == SLOW_DOWN
                 and display_state(result.distance_m, self.showing_stop, cfg, True, halted) != SLOW_DOWN):
-            self.stop_withheld += 1      # STOP or overshoot but for arrive_mps / recede_mps
+            self.stop_withheld += 1      # STOP or overshoot but for arrive_mps / recede_mps / stop_lateral_m
         if result.state == STOP and not self.showing_stop and result.distance_m > cfg.stop_m:
             self.halted_stops += 1       # STOP came for an aircraft standing still short of stop_m
         if result.state == TRACKING:
