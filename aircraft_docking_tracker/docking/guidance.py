@@ -595,11 +595,11 @@ class DockingGuidance:
               and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.gate_hold_s):
             self.restart()               # rejected for longer than gate_hold_s: the aircraft is where it is now
         self.last_stamp_ns = stamp_ns
-        awaiting_wheel = (not result.gear_measured and self.last_taken_gear and dt > 0
+        awaiting_wheel = (not at_rest and not result.gear_measured and self.last_taken_gear and dt > 0
                           and (stamp_ns - self.last_taken_ns) * 1e-9 <= cfg.gear_hold_s)
         if at_rest and self.last_taken_gear and not result.gear_measured:
             filtered, taken = self.filter.hold(), False    # the nose wheel's figures are not left for the template's
-        elif awaiting_wheel and not at_rest:
+        elif awaiting_wheel:
             self.filter.predict(dt)                         # nor, for gear_hold_s, while the aircraft moves
             filtered, taken = self.filter.x.copy(), False
         else:
@@ -609,7 +609,7 @@ class DockingGuidance:
         (distance, rate), (lateral, _) = filtered
         if taken:
             self.last_taken_ns, self.last_taken_gear = stamp_ns, result.gear_measured
-        elif awaiting_wheel and not at_rest:
+        elif awaiting_wheel:
             self.awaited_wheel += 1
         else:
             self.rejected += 1

@@ -109,7 +109,10 @@ class StandCalibration:
         sigma = self.click_sigma_px
         if self.marks is None or not np.isfinite(sigma):
             return np.full((2, 2), np.nan)
-        return self.marks.covariance(point, sigma)
+        try:
+            return self.marks.covariance(point, sigma)
+        except ConfigError:           # marks on the edge of fitting at all: moved a twentieth of a pixel, they don't
+            return np.full((2, 2), np.nan)
 
     def aircraft_type(self, name: str) -> AircraftType:
         if name not in self.aircraft:
