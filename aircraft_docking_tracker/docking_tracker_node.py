@@ -329,7 +329,6 @@ class DockingProcessor(MessageProcessor):
                            "guidance STOP withheld (figure too fast, or off the line)": self.guidance.stop_withheld,
                            "guidance STOPs for a standing aircraft": self.guidance.halted_stops,
                            "guidance figures held at STOP (measurement not taken)": self.guidance.held_at_stop,
-                           "guidance frames without the nose wheel not taken": self.guidance.awaited_wheel,
                            "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name,
                            "survey at the stop mark, along / across the line (95 %) m":
                                "{:.2f} / {:.2f}".format(*(2 * np.array(self.guidance.survey_sigma_m)))})

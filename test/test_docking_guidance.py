@@ -417,40 +417,6 @@ def test_figures_hold_at_the_mark_when_the_track_breaks_up(scene, frames, wheel)
     assert max(abs(r.distance_m) for r in loose) > 10.0                       # the broken track's figures
 
 
-def test_frames_without_the_nose_wheel_wait_for_it(scene, frames):
-    """gear_hold_s: the nose wheel measured on every other frame, the frames between with a quadrilateral slid 4 m
-    aside and grown 10 % (the template alone reading metres off, as on bench approach 112): those frames are not
-    taken (counted) and the figures follow the wheel; with the rule off they are taken at a small gain (their
-    size's sigma is metres) and drag the figures a tenth of a metre and more towards the template's.
-    A wheel gone for longer than gear_hold_s leaves the figures to the template again."""
-    stand = parse_stand(scene.stand_calibration(click_sigma_px=0.0))
-    aside = stand.camera.project([[4.0, 0.0, 0.0]])[0] - stand.camera.project([[0.0, 0.0, 0.0]])[0]
-    near = [k for k, (_, truth, _, _) in enumerate(frames) if 3.0 < truth[0] <= 15.0]
-
-    def run(**cfg):
-        guidance = DockingGuidance(stand, GuidanceConfig(**cfg))
-        errors = []
-        for k, (quad, truth, stamp, nose_ground) in enumerate(frames):
-            started = k >= near[0] - 30                 # the approach so far on the true quadrilaterals alone
-            wheel = started and k % 2 == 0
-            bad = quad.mean(axis=0) + (quad - quad.mean(axis=0)) * 1.1 + aside
-            result = guidance.update(bad if started and not wheel else quad, True, False, stamp,
-                                     _contact(stand, nose_ground) if wheel else None)
-            if k in near:
-                errors.append(np.hypot(result.distance_m - truth[0], result.lateral_m - truth[1]))
-        return guidance, np.array(errors)
-
-    guidance, waited = run()
-    assert guidance.awaited_wheel >= len(near) // 2 and np.percentile(waited, 95) < 0.05     # measured 0.015 m
-    _, followed = run(gear_hold_s=0.0)
-    assert np.percentile(followed, 95) > max(0.1, 5 * np.percentile(waited, 95))            # measured 0.16 m
-    guidance = DockingGuidance(stand, GuidanceConfig())
-    quad, _, stamp, nose_ground = frames[near[0]]
-    guidance.update(quad, True, False, stamp, _contact(stand, nose_ground))
-    gone = [guidance.update(quad + aside, True, False, stamp + k * NS // 14) for k in range(1, 30)]
-    assert not gone[0].measurement_taken and gone[-1].measurement_taken       # 2 s without the wheel
-
-
 def test_a_creep_past_the_mark_after_stop_is_shown_overshoot(scene, frames):
     """stop_holds leaves a slow creep on past the mark to be followed: an aircraft that rolls on at 0.3 m/s, with
     its nose wheel measured, is shown overshoot once it is overshoot_m past, and its figures follow it there."""

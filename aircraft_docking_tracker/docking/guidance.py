@@ -41,9 +41,7 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
    (:data:`GATE_AFTER` measurements), a distance more than ``gate_sigma`` sigmas of the innovation
    from the prediction is rejected and counted (an aircraft does not jump; a tracker that slips onto the
    jet bridge does), and the prediction is shown; rejected for longer than ``gate_hold_s``, the filter
-   restarts from the new figures. Once a figure at the nose wheel was taken, a frame without the wheel is not
-   taken for ``gear_hold_s`` either (the template alone reads metres off), and is counted. The closing rate is
-   held within ``max_speed_mps``; a rate at that clamp is no
+   restarts from the new figures. The closing rate is held within ``max_speed_mps``; a rate at that clamp is no
    aircraft (a track that jumped, or re-acquired on the wrong thing), and the approach followed and the time in
    slow down (step 5) count again from there.
 5. **State** (as the display shows it): 0 no aircraft (the tracker waits), 1 tracking, 2 slow down
@@ -181,14 +179,6 @@ class GuidanceConfig:
                              "frame by frame, to overshoot. A tracker that breaks up on the parked aircraft had shown "
                              "it 20-45 m past its mark under STOP (fresh approaches 6001, 6007, 6010; held out 201, "
                              "207, 219)")
-    gear_hold_s: float = param(1.0, "after a figure taken at the nose wheel, a frame without it is not taken for "
-                               "this long [s] (the prediction is shown; then, as after gate_hold_s, the template's "
-                               "figures are followed): the tracked quadrilateral alone reads metres off where the "
-                               "wheel is found in every other frame (112, every seed: 4-7 m short, 4 m aside, taken "
-                               "at a small gain, dragged the shown figure 1 m). Session 32, on 420 cached runs: "
-                               "no STOP moved, tuning set's p95 0.462 -> 0.450 m, held out 0.475 -> 0.469, the "
-                               "other sets within 0.001 m; 0.3 to 1.5 s give the same within 0.01 m; 0: off",
-                               low=0.0, high=60.0)
     gear_pixel_sigma: float = param(0.25, "the nose wheel's measured ground contact's error [px, 1 sigma] (its "
                                     "range's weight)", low=0.01, high=1000.0)
     gear_min_height_px: float = param(80.0, "measure the nose wheel's ground contact once the tracked template "
@@ -501,7 +491,6 @@ class DockingGuidance:
         self.stop_withheld = 0            # frames STOP or overshoot was withheld: too fast, or off the line
         self.halted_stops = 0             # STOPs shown for an aircraft standing still (halted_stop_m)
         self.held_at_stop = 0             # frames under STOP whose measurement was not taken (stop_holds)
-        self.awaited_wheel = 0            # frames without the nose wheel not taken (gear_hold_s)
         self.last_taken_ns: int | None = None
         self.last_taken_gear = False      # the last measurement taken was of the nose wheel
         self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
@@ -595,13 +584,8 @@ class DockingGuidance:
               and (stamp_ns - self.last_taken_ns) * 1e-9 > cfg.gate_hold_s):
             self.restart()               # rejected for longer than gate_hold_s: the aircraft is where it is now
         self.last_stamp_ns = stamp_ns
-        awaiting_wheel = (not at_rest and not result.gear_measured and self.last_taken_gear and dt > 0
-                          and (stamp_ns - self.last_taken_ns) * 1e-9 <= cfg.gear_hold_s)
         if at_rest and self.last_taken_gear and not result.gear_measured:
             filtered, taken = self.filter.hold(), False    # the nose wheel's figures are not left for the template's
-        elif awaiting_wheel:
-            self.filter.predict(dt)                         # nor, for gear_hold_s, while the aircraft moves
-            filtered, taken = self.filter.x.copy(), False
         else:
             filtered, taken = self.filter.step(dt, [result.distance_m, result.lateral_m],
                                                [sigma ** 2, lateral_sigma ** 2], cfg.gate_sigma, cfg.max_speed_mps,
@@ -609,8 +593,6 @@ class DockingGuidance:
         (distance, rate), (lateral, _) = filtered
         if taken:
             self.last_taken_ns, self.last_taken_gear = stamp_ns, result.gear_measured
-        elif awaiting_wheel:
-            self.awaited_wheel += 1
         else:
             self.rejected += 1
             self.held_at_stop += at_rest
