@@ -331,7 +331,7 @@ class DockingProcessor(MessageProcessor):
                            "guidance figures held at STOP (measurement not taken)": self.guidance.held_at_stop,
                            "stand": self.guidance.stand.name, "aircraft type": self.guidance.aircraft.name,
                            "survey at the stop mark, along / across the line (95 %) m":
-                               "{:.2f} / {:.2f}".format(*(2 * np.array(self.guidance.survey_sigma_m)))})
+                               "{:.2f} / {:.2f}".format(*self.guidance.survey_95_m)})
         return values
 
 

@@ -213,8 +213,7 @@ def drawn_distances(scene, stand_exact) -> np.ndarray:
     out = []
     for i in range(scene.config.frames):
         pixel = apply_affine(scene.pose(i)[0], [[NOSE_TPL[0], row]])[0]
-        depth = stand_exact.camera.depth_on_plane([pixel], 0.0)[0]
-        out.append(stop_arc - along_line(stand_exact.lead_in, stand_exact.camera.point_at_depth(pixel, depth)[0])[0])
+        out.append(stop_arc - along_line(stand_exact.lead_in, stand_exact.camera.on_plane([pixel])[0])[0])
     return np.array(out)
 
 
@@ -226,7 +225,7 @@ def survey_at_stop(stand, stand_exact) -> dict:
 
     aircraft = stand.aircraft_type(next(iter(stand.aircraft)))
     pixel = stand_exact.camera.project([[*aircraft.stop_m, 0.0]])
-    seen = stand.camera.point_at_depth(pixel, stand.camera.depth_on_plane(pixel, 0.0))[0, :2]
+    seen = stand.camera.on_plane(pixel)[0, :2]
     stop_arc = along_line(stand.lead_in, aircraft.stop_m)[0]
     return {"error_m": float(stop_arc - along_line(stand.lead_in, seen)[0]),
             "predicted95_m": 2 * survey_sigma(stand, aircraft.stop_m)[0]}

@@ -73,6 +73,7 @@ tracker's affine state X̂_t (seed 000 §2: the template's image is the affine q
 """
 from __future__ import annotations
 
+import functools
 import logging
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -300,13 +301,13 @@ def survey_sigma(stand: StandCalibration, point) -> tuple[float, float]:
 def survey_note(guidance: DockingGuidance) -> tuple[int, str]:
     """What the stand's survey allows, once at start-up: (logging level, text); a warning when the stop mark's
     distance is surveyed no better than ``SURVEY_WARN_M`` (95 %)."""
-    stand, along, across = guidance.stand, *guidance.survey_sigma_m
+    stand, along, across = guidance.stand, *guidance.survey_95_m
     if not np.isfinite(along):
         return logging.WARNING, f"stand {stand.name!r}: the survey's error at the stop mark cannot be told"
-    text = (f"stand {stand.name!r}, {guidance.aircraft.name}: the survey puts the stop mark to +-{2 * along:.2f} m "
-            f"along the lead-in line and +-{2 * across:.2f} m across (95 %; the marks' residuals, "
+    text = (f"stand {stand.name!r}, {guidance.aircraft.name}: the survey puts the stop mark to +-{along:.2f} m "
+            f"along the lead-in line and +-{across:.2f} m across (95 %; the marks' residuals, "
             f"{stand.reprojection_px:.2f} px RMS, read as {stand.click_sigma_px:.2f} px a click)")
-    if 2 * along <= SURVEY_WARN_M:
+    if along <= SURVEY_WARN_M:
         return logging.INFO, text
     return logging.WARNING, (text + f": more than {SURVEY_WARN_M:g} m, half of the +-0.5 m an advanced VDGS stops "
                              "to; the distance to go can be that far off on every approach. Add marks near the stop "
@@ -480,7 +481,6 @@ class DockingGuidance:
         self.aircraft = stand.aircraft_type(self.config.aircraft_type or next(iter(stand.aircraft)))
         self.stop_arc = along_line(stand.lead_in, self.aircraft.stop_m)[0]
         self.stop_bar = stop_bar(stand.lead_in, self.aircraft.stop_m)
-        self.survey_sigma_m = survey_sigma(stand, self.aircraft.stop_m)
         self.filter = ConstantVelocityFilter(2, self.config.accel_sigma)
         self.last_stamp_ns: int | None = None
         self.showing_stop = False
@@ -496,6 +496,18 @@ class DockingGuidance:
         self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
         self.slow_since_ns: int | None = None   # when slow down (or nearer) was first shown, continuously
         self.recent: deque = deque()      # (stamp, smoothed distance) of the measured frames of the last halted_s
+
+    @functools.cached_property
+    def survey_sigma_m(self) -> tuple[float, float]:
+        """The survey's error at the stop mark [m, 1 sigma], along the lead-in line and across it (:func:`survey_sigma`;
+        2N camera refits: made when first asked, not with every guidance)."""
+        return survey_sigma(self.stand, self.aircraft.stop_m)
+
+    @property
+    def survey_95_m(self) -> tuple[float, float]:
+        """:attr:`survey_sigma_m` at 95 % (two sigmas) [m], as the start-up note and the diagnostics give it."""
+        along, across = self.survey_sigma_m
+        return 2 * along, 2 * across
 
     def reset(self) -> None:
         self.restart()
@@ -609,12 +621,13 @@ class DockingGuidance:
         # and slow down shown long enough; STOP shown stays on until a measurement of a followed approach clears it
         in_zone_s = (stamp_ns - self.slow_since_ns) * 1e-9 if self.slow_since_ns is not None else 0.0
         approached = taken and self.farthest_m - result.distance_m >= cfg.approach_m
-        steady = (-cfg.recede_mps <= result.speed_mps <= cfg.arrive_mps
-                  and abs(result.lateral_m) <= cfg.stop_lateral_m)
-        followed = approached and steady
+        # an aircraft arriving: at walking pace, not backing away, and on its lead-in line
+        plausible = (-cfg.recede_mps <= result.speed_mps <= cfg.arrive_mps
+                     and abs(result.lateral_m) <= cfg.stop_lateral_m)
+        followed = approached and plausible
         result.state = STOP if self.showing_stop and not followed else display_state(
             result.distance_m, self.showing_stop, cfg, followed and in_zone_s >= cfg.slow_down_min_s, halted)
-        if (approached and not steady and in_zone_s >= cfg.slow_down_min_s and result.state == SLOW_DOWN
+        if (approached and not plausible and in_zone_s >= cfg.slow_down_min_s and result.state == SLOW_DOWN
                 and display_state(result.distance_m, self.showing_stop, cfg, True, halted) != SLOW_DOWN):
             self.stop_withheld += 1      # STOP or overshoot but for arrive_mps / recede_mps / stop_lateral_m
         if result.state == STOP and not self.showing_stop and result.distance_m > cfg.stop_m:

@@ -23,6 +23,7 @@ raises :class:`~aircraft_docking_tracker.config.ConfigError` with the key path i
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,6 +87,11 @@ class StandCamera:
         """Stand points (N, 3) on each pixel's ray at the given optical-axis depth."""
         return self.centre + self.rays(pixels) * np.reshape(depth, (-1, 1))
 
+    def on_plane(self, pixels, height_m: float = 0.0) -> np.ndarray:
+        """Stand points (N, 3) where each pixel's ray meets the plane z = ``height_m`` (the apron by default; NaN
+        where it does not, in front of the camera)."""
+        return self.point_at_depth(pixels, self.depth_on_plane(pixels, height_m))
+
 
 @dataclass(frozen=True)
 class StandCalibration:
@@ -95,22 +101,26 @@ class StandCalibration:
     camera: StandCamera
     lead_in: np.ndarray                # (M, 2) [m], entry first
     aircraft: dict                     # name -> AircraftType
-    reprojection_px: float             # RMS reprojection error of the apron marks
-    marks: ApronMarks | None = None    # the surveyed marks the camera was fitted to
+    marks: ApronMarks                  # the surveyed marks the camera was fitted to
+
+    @functools.cached_property
+    def reprojection_px(self) -> float:
+        """RMS reprojection error of the apron marks [px]."""
+        return self.marks.reprojection_px(self.camera)
 
     @property
     def click_sigma_px(self) -> float:
         """The marks' clicking error [px, 1 sigma] that their residuals imply (NaN: too few marks to tell)."""
-        return self.marks.click_sigma_px(self.reprojection_px) if self.marks is not None else float("nan")
+        return self.marks.click_sigma_px(self.reprojection_px)
 
     def survey_covariance(self, point) -> np.ndarray:
         """The 2x2 covariance [m^2] the survey leaves on the apron ``point`` [m] (:meth:`ApronMarks.covariance` at
-        :attr:`click_sigma_px`); NaN if it cannot be told."""
+        :attr:`click_sigma_px`, about this stand's camera); NaN if it cannot be told."""
         sigma = self.click_sigma_px
-        if self.marks is None or not np.isfinite(sigma):
+        if not np.isfinite(sigma):
             return np.full((2, 2), np.nan)
         try:
-            return self.marks.covariance(point, sigma)
+            return self.marks.covariance(point, sigma, self.camera)
         except ConfigError:           # marks on the edge of fitting at all: moved a twentieth of a pixel, they don't
             return np.full((2, 2), np.nan)
 
@@ -216,17 +226,18 @@ class ApronMarks:
         n = len(self.ground)
         return float(reprojection_px * np.sqrt(n / (2 * n - parameters))) if 2 * n > parameters else float("nan")
 
-    def covariance(self, point, sigma_px: float, step_px: float = 0.05) -> np.ndarray:
+    def covariance(self, point, sigma_px: float, camera: StandCamera | None = None,
+                   step_px: float = 0.05) -> np.ndarray:
         """The 2x2 covariance [m^2] of where the fitted camera puts the apron ``point`` [m] (x, y), from clicks
         each ``sigma_px`` off (independent): Sigma = sigma^2 J^T J, J the derivative, by each of the marks' 2N image
         coordinates, of the apron point that the camera fitted to the moved marks sees at ``point``'s pixel
         (central differences of ``step_px``; first-order propagation through the fit). It is the bias a survey
-        leaves on every figure measured near ``point``: no smoothing removes it."""
-        pixel = self.camera().project([[float(point[0]), float(point[1]), 0.0]])
+        leaves on every figure measured near ``point``: no smoothing removes it. ``camera``: the marks' own fit,
+        if already made."""
+        pixel = (camera or self.camera()).project([[float(point[0]), float(point[1]), 0.0]])
 
         def apron_at(image: np.ndarray) -> np.ndarray:
-            camera = self.camera(image)
-            return camera.point_at_depth(pixel, camera.depth_on_plane(pixel, 0.0))[0, :2]
+            return self.camera(image).on_plane(pixel)[0, :2]
 
         jacobian = np.empty((self.image.size, 2))
         for k in range(self.image.size):
@@ -237,8 +248,8 @@ class ApronMarks:
         return sigma_px ** 2 * jacobian.T @ jacobian
 
 
-def calibrate_camera(table: dict) -> tuple[StandCamera, float, ApronMarks]:
-    """The ``camera`` section -> (camera, RMS reprojection error of its marks [px], the marks)."""
+def calibrate_camera(table: dict) -> tuple[StandCamera, ApronMarks]:
+    """The ``camera`` section -> (camera, the marks it was fitted to)."""
     if not isinstance(table, dict):
         raise ConfigError("camera: needs a mapping (image_size, points, optional focal_px, principal_point)",
                           ("camera",))
@@ -263,15 +274,14 @@ def calibrate_camera(table: dict) -> tuple[StandCamera, float, ApronMarks]:
         raise ConfigError(f"camera.focal_px: needs a positive number (or 0: estimate it), got {focal!r}",
                           ("camera.focal_px",))
     marks = ApronMarks(ground, image, size, principal, float(focal))
-    camera = marks.camera()
-    return camera, marks.reprojection_px(camera), marks
+    return marks.camera(), marks
 
 
 def parse_stand(data: dict, name: str = "stand") -> StandCalibration:
     """A stand file's mapping -> :class:`StandCalibration` (every field checked)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{name}: a stand file holds a mapping (camera, lead_in, aircraft)", ())
-    camera, error, marks = calibrate_camera(data.get("camera"))
+    camera, marks = calibrate_camera(data.get("camera"))
     lead_in = _points(data.get("lead_in"), "lead_in")
     if len(lead_in) < 2 or np.linalg.norm(np.diff(lead_in, axis=0), axis=1).min() <= 0:
         raise ConfigError("lead_in: needs at least 2 distinct points [m], entry first", ("lead_in",))
@@ -296,7 +306,7 @@ def parse_stand(data: dict, name: str = "stand") -> StandCalibration:
             str(type_name), _points(entry.get("stop_m"), f"{path}.stop_m", 1)[0],
             _positive(entry, "nose_height_m", path), _positive(entry, "height_m", path),
             _positive(entry, "wingspan_m", path), nose, float(setback))
-    return StandCalibration(str(data.get("stand", name)), camera, lead_in, aircraft, error, marks)
+    return StandCalibration(str(data.get("stand", name)), camera, lead_in, aircraft, marks)
 
 
 def load_stand(path: str | Path) -> StandCalibration:
