@@ -25,7 +25,8 @@
   minus false alarms, pooled) and applied unchanged to the evaluation seeds; also each one's AP and its
   detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
-  side by side in this run: the set-up (its size range from the known altitude) against the same
+  side by side in this run: the set-up (its size range from the known altitude) against the same set-up without
+  the colour blobs' views (``BEFORE_BLOBS``, the set-up before them), the same
   model scanning every window size that fits the frame, the same cascade without the colour verifier
   (``CASCADE_ONLY``, the set-up before it), the previous heading-aligned set-up (``PREVIOUS``),
   the upright set-up before it at this altitude (upright 3:2 model, 0 and 90 degrees only: ``UPRIGHT``) and
@@ -62,7 +63,7 @@ from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
 from aircraft_docking_tracker.object_table import confident_rows  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
-    UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_UPRIGHT as UPRIGHT,
+    UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_UPRIGHT as UPRIGHT,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
     UavSceneConfig, detection_truth)
 from multi_target_tracker.detector import Detector, DetectorConfig, group_stats, suppress_contained  # noqa: E402
@@ -112,7 +113,9 @@ def short_sides(items) -> np.ndarray:
 
 
 def setup_detector() -> Detector:
-    processor = build_processor("detector", package_config_dir() / SETUP)
+    """The set-up's detector on one thread: ``config/uav_camera.yaml`` sets ``threads`` 2 for ``make demo``'s two
+    cameras, and the speed target is one core's (before session 33 this bench timed the yaml's two threads)."""
+    processor = build_processor("detector", package_config_dir() / SETUP, {"threads": 1})
     if processor.detector is None:
         raise SystemExit(f"bench/uav_detector.py: {SETUP}: {processor.model_error}")
     return processor.detector
@@ -150,7 +153,7 @@ def group_confidences(det: Detector, image: np.ndarray) -> tuple[np.ndarray, dic
     """The set-up's groups of one frame (every group of at least ``VERIFIER_MIN_WINDOWS`` windows; boxes as
     ``detect`` scales them) and each confidence of :data:`CONFIDENCES` per group."""
     cfg = det.config
-    group_boxes, counts, margin_sums, best = group_stats(*det.raw(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)),
+    group_boxes, counts, margin_sums, best = group_stats(*det.raw(image),
                                                          cfg.group_iou, cfg.window_margin,
                                                          min_count=VERIFIER_MIN_WINDOWS)
     confidences = {"count": counts + expit(best), "margin_sum": margin_sums, "best_margin": best}
@@ -232,16 +235,19 @@ MISS_CLASSES = ("counted vehicles", "found", "detection on it at IoU 0.3-0.5 (mi
 
 def miss_breakdown(detectors: dict, seeds: list[tuple[int, int]]) -> dict:
     """Per detector (each with a verifier), its counted vehicles of ``seeds`` by :data:`MISS_CLASSES`: found, or
-    the first reason that fits why not. The detectors' windows are scanned once a frame (same model and scan)."""
-    first = next(iter(detectors.values()))
+    the first reason that fits why not. The windows are scanned once a frame for the detectors with the colour blobs'
+    views and once for those without (same model and scan otherwise)."""
     out = {name: dict.fromkeys(MISS_CLASSES, 0) for name in detectors}
     for seed, difficulty in seeds:
         for image, truth, ignore, _ in frames_of(seed, difficulty, UAV_SETUP_GROUND_RESOLUTION):
-            raw = first.raw(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
+            raws = {}
             counted = np.flatnonzero(~ignore)
             cut = truncated(truth, image.shape[1::-1])
             for name, det in detectors.items():
                 cfg = det.config
+                if cfg.blob_views not in raws:
+                    raws[cfg.blob_views] = det.raw(image)
+                raw = raws[cfg.blob_views]
                 boxes, logit = det.candidates(image, *raw, cfg.window_margin)
                 boxes = scale_boxes(boxes, cfg.box_scale) if len(boxes) else boxes
                 final, scores = det.verified(image, *raw, cfg.window_margin)
@@ -293,6 +299,7 @@ def main() -> int:
     former = Detector(DetectorConfig(**FORMER))
     upright = Detector(DetectorConfig(**UPRIGHT))
     previous = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **PREVIOUS}))
+    before_blobs = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **BEFORE_BLOBS}))
     cascade_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **CASCADE_ONLY}))
     verifier_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **VERIFIER_ONLY}))
     logistic = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **LOGISTIC}))
@@ -301,7 +308,7 @@ def main() -> int:
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
-               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
+               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "before_blobs": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
                "other_seed_model": args.other_seed_model}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
@@ -313,6 +320,7 @@ def main() -> int:
         results["seeds"].append({"seed": seed, "difficulty": difficulty})
         results["setup_results"].append(run(det, items))
         results["full_pyramid"].append(run(full, items[::4]))      # speed and false alarms without the size prior
+        results["before_blobs"].append(run(before_blobs, items))
         results["cascade_only"].append(run(cascade_only, items))
         results["verifier_only"].append(run(verifier_only, items))
         results["logistic"].append(run(logistic, items))
@@ -325,13 +333,13 @@ def main() -> int:
         r = results["setup_results"][-1]
         print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
               f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
-    for key in ("setup_results", "full_pyramid", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
+    for key in ("setup_results", "full_pyramid", "before_blobs", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
         if results[key]:
             results[key + "_summary"] = spread(results[key])
     # group confidences of the verifier's groups as they were compared (mean boxes, box_scale 0.9)
     results["confidences"] = confidence_summary(confidence_runs(verifier_only, TUNING),
                                                 confidence_runs(verifier_only, seeds))
-    results["misses"] = {"tuning": miss_breakdown({"setup": det, "logistic": logistic, "verifier_only": verifier_only}, TUNING)}
+    results["misses"] = {"tuning": miss_breakdown({"setup": det, "before_blobs": before_blobs, "logistic": logistic, "verifier_only": verifier_only}, TUNING)}
     results["setup_results_difficulty_1_summary"] = spread(
         [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
     (HERE / "results").mkdir(exist_ok=True)
@@ -381,6 +389,8 @@ def markdown(results: dict) -> str:
              line("same model, every window size (no altitude prior; every 4th frame)", full),
              *([line(f"same recipe, another training seed ({Path(results['other_seed_model']).name})",
                      results["other_seed_summary"])] if "other_seed_summary" in results else []),
+             *([line("without the colour blobs' views (the scan's windows alone: the set-up before session 33)",
+                     results["before_blobs_summary"])] if "before_blobs_summary" in results else []),
              line("logistic colour verifier (mean box's colour, threshold 1.217) with the box regressor: the set-up "
                   "before the tree verifier", results["logistic_summary"]),
              line("logistic verifier without the box regressor (mean boxes, box_scale 0.9, min_neighbors 3, "

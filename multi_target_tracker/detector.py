@@ -55,6 +55,7 @@ from scipy.special import expit
 from aircraft_docking_tracker.config import ConfigError, param
 from aircraft_docking_tracker.geometry import box_to_quad, scale_boxes
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, FLAGGED_DETECTION_DTYPE, LOW_CONFIDENCE
+from multi_target_tracker import blob_views
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
@@ -92,6 +93,22 @@ class DetectorConfig:
                         "boxes are clipped to the frame and windows centred outside it dropped, as in the turned "
                         "views, whose canvases hold reflected borders already; 0: windows inside the frame only",
                         low=0, high=256)
+    blob_views: bool = param(False, "also scan each colour blob of the frame (an MSER region of the colour's "
+                             "distance from the ground around it, rectangle-shaped) along its own axis, at the one "
+                             "scale that frames it as the model's training chips framed a vehicle; its windows join "
+                             "the scan's before grouping (blob_views.py; needs colour images and a model trained on "
+                             "heading-aligned objects: the UAV set-up's)")
+    blob_background: float = param(122.0, "side of the square around each pixel whose mean colour is its ground, "
+                                   "for blob_views [px]", low=8.0, high=2000.0)
+    blob_min_fill: float = param(0.5, "share of its rotated bounding rectangle a colour region must fill to be a "
+                                 "blob (blob_views)", low=0.0, high=1.0)
+    blob_context: float = param(1.25, "the blob's window holds its length x width (reshaped to the window's aspect) "
+                                "enlarged this many times: the context of the model's training chips (blob_views)",
+                                low=1.0, high=4.0)
+    turned_crop: float = param(0.0, "scan only the central square of each turned view (angles other than 0), of "
+                               "this many times the square root of the frame's area a side (a 640x480 frame turned "
+                               "45 degrees fills half of its 792-px canvas; 1.1: a 610-px square, 0.59 of the "
+                               "canvas); 0: the whole canvas", low=0.0, high=4.0)
     group_iou: float = param(0.3, "a window joins a group when it overlaps the group's best window by this "
                              "IoU", low=0.0, high=1.0)
     min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
@@ -145,6 +162,8 @@ class DetectorConfig:
             raise ConfigError(f"angles must be 1-8 numbers in [-180, 180] degrees, got {angles}", ("angles",))
         if self.backend == "opencv" and any(a != 0 for a in angles):
             raise ConfigError("angles other than 0 need the cascade backend", ("angles", "backend"))
+        if self.blob_views and self.backend != "cascade":
+            raise ConfigError("blob_views needs the cascade backend", ("blob_views", "backend"))
         if self.verifier and self.backend != "cascade":
             raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
         if self.low_confidence_band > 0 and not self.verifier:
@@ -271,10 +290,13 @@ def window_scales(window: tuple[int, int], frame_size: tuple[int, int], scale_fa
     return scales
 
 
-def turned_view(gray: np.ndarray, angle: float, border: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
+def turned_view(gray: np.ndarray, angle: float, border: int = 0,
+                crop: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
     """``gray`` turned by ``angle`` degrees about its centre on a canvas that holds all of it (borders
     reflected), and the 2x3 affine map from the canvas back to ``gray`` (None for angle 0 without ``border``).
-    At angle 0 the canvas is ``gray`` with ``border`` reflected pixels on every side."""
+    At angle 0 the canvas is ``gray`` with ``border`` reflected pixels on every side. With ``crop`` > 0 a turned
+    canvas keeps only its central square of ``crop`` times the square root of ``gray``'s area a side (a 640x480
+    frame turned 45 degrees: 792 px a side, half of it reflected border; crop 1.1: 610)."""
     if angle % 360 == 0:
         if border <= 0:
             return gray, None
@@ -283,6 +305,9 @@ def turned_view(gray: np.ndarray, angle: float, border: int = 0) -> tuple[np.nda
     h, w = gray.shape
     c, s = abs(np.cos(np.radians(angle))), abs(np.sin(np.radians(angle)))
     size = (int(np.ceil(w * c + h * s)), int(np.ceil(w * s + h * c)))
+    if crop > 0:
+        side = int(round(crop * np.sqrt(w * h)))
+        size = (min(size[0], side), min(size[1], side))
     turn = cv2.getRotationMatrix2D((w / 2, h / 2), float(angle), 1.0)
     turn[:, 2] += (size[0] / 2 - w / 2, size[1] / 2 - h / 2)
     view = cv2.warpAffine(gray, turn, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
@@ -492,22 +517,27 @@ class Detector:
 
     @property
     def needs_colour(self) -> bool:
-        """Whether :meth:`detect` needs a BGR image (a colour verifier is configured)."""
-        return self.verifier is not None
+        """Whether :meth:`detect` needs a BGR image (a colour verifier or ``blob_views`` is configured)."""
+        return self.verifier is not None or (self.cascade is not None and self.config.blob_views)
 
-    def raw(self, gray: np.ndarray, last_stage_margin: float | None = None):
-        """Ungrouped windows ``(boxes, scores)`` in ``gray``'s pixels, both orientations if configured."""
+    def raw(self, image: np.ndarray, last_stage_margin: float | None = None):
+        """Ungrouped windows ``(boxes, scores)`` in ``image``'s pixels (grey, or BGR: ``blob_views`` needs colour),
+        both orientations if configured, and the windows of the colour blobs' views with ``blob_views``."""
         cfg = self.config
+        gray = to_gray(image)
         margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
         views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         if self.cascade is not None:   # every (view, level) is one job; merged in job order either way
-            turned = [turned_view(gray, angle, cfg.border) for angle in self.angles]
+            turned = [turned_view(gray, angle, cfg.border, cfg.turned_crop) for angle in self.angles]
             views = [(np.ascontiguousarray(v.T) if transposed else v, transposed, back) for v, back in turned
                      for transposed in ((False, True) if self.both_orientations else (False,))]
-            jobs = [(view, transposed, back, scale) for view, transposed, back in views
+            jobs = [(view, transposed, back, scale, cfg.stride) for view, transposed, back in views
                     for scale in window_scales(self.window, view.shape[::-1], cfg.scale_factor, self.min_size,
                                                self.max_size)]
-            scan = lambda job: scan_level(job[0], self.cascade, job[3], cfg.stride, margin)  # noqa: E731
+            if cfg.blob_views:
+                jobs += [(canvas, False, back, scale, blob_views.STRIDE)
+                         for canvas, scale, back in self.blob_canvases(image, gray)]
+            scan = lambda job: scan_level(job[0], self.cascade, job[3], job[4], margin)  # noqa: E731
             levels = list(self.pool.map(scan, jobs) if self.pool is not None else map(scan, jobs))
             frame = gray.shape[::-1]
             mapped = [map_back(b[:, [1, 0, 3, 2]] if job[1] else b, sc, job[2], frame)
@@ -523,26 +553,36 @@ class Detector:
             all_scores.append(scores)
         return np.vstack(all_boxes), np.concatenate(all_scores)
 
+    def blob_canvases(self, image: np.ndarray, gray: np.ndarray) -> list[tuple[np.ndarray, float, np.ndarray]]:
+        """``(canvas, scale, canvas-to-frame affine)`` of each colour blob of ``image`` (:mod:`blob_views`)."""
+        if not (image.ndim == 3 and image.shape[2] == 3):
+            raise DetectorError(f"blob_views needs a BGR image, got shape {image.shape}")
+        cfg = self.config
+        aspect = self.window[0] / self.window[1]
+        blobs = blob_views.colour_blobs(image, cfg.blob_background, cfg.blob_min_fill, aspect, cfg.blob_context,
+                                        self.min_size, self.max_size)
+        return [blob_views.blob_view(gray, blob, self.window, cfg.blob_context) for blob in blobs]
+
     def detect(self, image: np.ndarray, last_stage_margin: float | None = None) -> np.ndarray:
-        """Detections in ``image`` (grey or BGR uint8; BGR with a verifier), best score first."""
+        """Detections in ``image`` (grey or BGR uint8; BGR with a verifier or blob views), best score first."""
         cfg = self.config
         gray = to_gray(image)
-        if self.verifier is not None and not (image.ndim == 3 and image.shape[2] == 3):
-            raise DetectorError(f"the colour verifier needs a BGR image, got shape {image.shape}")
+        if self.needs_colour and not (image.ndim == 3 and image.shape[2] == 3):
+            raise DetectorError(f"the colour verifier and blob_views need a BGR image, got shape {image.shape}")
         x0, y0 = 0, 0
         rx, ry, rw, rh = (int(v) for v in cfg.roi)
         if rw > 0 and rh > 0:
             x0, y0 = max(0, rx), max(0, ry)
-            gray = gray[y0:ry + rh, x0:rx + rw]
-            if gray.size == 0:
+            if image[y0:ry + rh, x0:rx + rw].size == 0:
                 raise DetectorError(f"roi {cfg.roi} lies outside the {image.shape[1]}x{image.shape[0]} frame")
+            gray, image = gray[y0:ry + rh, x0:rx + rw], image[y0:ry + rh, x0:rx + rw]
         try:
-            boxes, scores = self.raw(gray, last_stage_margin)
+            boxes, scores = self.raw(image if self.needs_colour else gray, last_stage_margin)
         except FeatureError as exc:
             raise DetectorError(str(exc)) from exc
         low = None
         if self.verifier is not None:
-            boxes, scores, low = self._verified(image[y0:y0 + gray.shape[0], x0:x0 + gray.shape[1]], boxes, scores,
+            boxes, scores, low = self._verified(image, boxes, scores,
                                                 cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.box_regressor is not None:
             boxes, scores = self._regressed(boxes, scores, gray.shape[::-1],

@@ -141,3 +141,24 @@ def test_border_lets_windows_reach_past_the_frame_onto_a_cut_object():
     outside = np.array([[320.0 + 32 + 1, 100.0 + 32, 24.0, 30.0]])    # centred in the border
     assert len(map_back(outside, np.ones(1), back, (320, 240))[0]) == 0
     assert turned_view(gray, 0.0, 0)[1] is None and turned_view(gray, 0.0, 0)[0] is gray
+
+
+def test_turned_crop_keeps_the_central_square_of_the_turned_view():
+    """With ``crop`` a turned view is the central square of the whole turned canvas (crop times the square root of
+    the frame's area a side), mapped back to the same frame points; the upright view is never cropped."""
+    from multi_target_tracker.detector import turned_view
+
+    rng = np.random.default_rng(0)
+    gray = cv2.GaussianBlur(rng.integers(0, 256, (240, 320), dtype=np.uint8), (0, 0), 4)   # smooth: half-pixel shifts
+    whole, back = turned_view(gray, 45.0)
+    crop, crop_back = turned_view(gray, 45.0, crop=1.1)
+    side = int(round(1.1 * np.sqrt(240 * 320)))
+    assert crop.shape == (side, side) and whole.shape[0] > side and whole.shape[1] > side
+    offset = (np.array(whole.shape[::-1]) - side) / 2                  # where the square sits in the whole canvas
+    centre = np.array([side / 2, side / 2])
+    assert np.allclose(crop_back @ [*centre, 1.0], back @ [*(centre + offset), 1.0])   # the same frame point
+    assert np.allclose(crop_back[:, :2], back[:, :2])
+    x0, y0 = np.round(offset).astype(int)
+    inner = (slice(8, side - 8), slice(8, side - 8))
+    assert np.abs(crop[inner].astype(int) - whole[y0:y0 + side, x0:x0 + side][inner].astype(int)).mean() < 3
+    assert turned_view(gray, 0.0, crop=1.1)[0] is gray and turned_view(gray, 0.0, 32, crop=1.1)[0].shape == (304, 384)

@@ -45,7 +45,7 @@ def samples(det: Detector, seeds) -> tuple[np.ndarray, np.ndarray]:
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, 4):
             counted = truth[~ignore]
-            members = group_members(*det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)), cfg.group_iou)
+            members = group_members(*det.raw(bgr), cfg.group_iou)
             kept, group_boxes, *_ = members_stats(*members, cfg.window_margin, cfg.min_neighbors)
             if not len(group_boxes) or not len(counted):
                 continue
@@ -70,7 +70,7 @@ def published_groups(det: Detector, seeds, every: int) -> list[tuple]:
     out = []
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, every, min_visible=0.3):
-            boxes, margins = det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
+            boxes, margins = det.raw(bgr)
             refined, logit, regression = det._candidates(bgr, boxes, margins, cfg.window_margin)
             keep = logit >= floor
             counted = truth[~ignore]

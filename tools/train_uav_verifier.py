@@ -38,7 +38,8 @@ from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccum
 from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
-    UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
+    UAV_BEFORE_BLOBS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig,
+    detection_truth)
 from multi_target_tracker.box_regression import member_features  # noqa: E402
 from multi_target_tracker.detector import (  # noqa: E402
     MODELS_DIR, Detector, group_members, members_stats, suppress_contained)
@@ -60,8 +61,9 @@ def scene_frames(seed: int, difficulty: int, every: int, min_visible: float = 0.
 
 
 def cascade_detector(overrides: dict | None = None) -> Detector:
+    # the shipped verifier and box regressor were trained on the scan's windows, before the colour blobs' views
     detector = build_processor("detector", package_config_dir() / SETUP,
-                               {"verifier": "", "box_regressor": "", "low_confidence_band": 0.0,
+                               {"verifier": "", "box_regressor": "", "low_confidence_band": 0.0, **UAV_BEFORE_BLOBS,
                                 **(overrides or {})}).detector
     if detector is None:
         raise SystemExit(f"{SETUP}: the detector cannot be built")
@@ -90,7 +92,7 @@ def samples(det: Detector, seeds, min_windows: int, refined: bool = False) -> tu
     rows, labels = [], []
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, 8):
-            members = group_members(*det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)), cfg.group_iou)
+            members = group_members(*det.raw(bgr), cfg.group_iou)
             kept, group_boxes, counts, sums, best = members_stats(*members, cfg.window_margin, min_windows)
             if not len(group_boxes):
                 continue
@@ -111,7 +113,7 @@ def samples(det: Detector, seeds, min_windows: int, refined: bool = False) -> tu
 
 def _scanned_frames(det: Detector, seeds) -> list:
     """(image, truth, ignore, the cascade's raw windows) of every 4th frame of the (seed, difficulty) scenes."""
-    return [(bgr, truth, ignore, det.raw(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)))
+    return [(bgr, truth, ignore, det.raw(bgr))
             for seed, difficulty in seeds for bgr, truth, ignore in scene_frames(seed, difficulty, 4)]
 
 

@@ -48,16 +48,19 @@ UAV_EVAL_SEEDS = range(3000, 4000)
 # Earlier UAV camera set-ups, as overrides of config/uav_camera.yaml's detector: bench/uav_detector.py measures
 # them beside the set-up and test/test_detector_uav_setup.py checks that the set-up still beats each.
 # the set-up before the colour verifier: the cascade's window count alone, its operating point (tuning seeds)
-UAV_CASCADE_ONLY = {"verifier": "", "box_regressor": "", "low_confidence_band": 0.0, "min_neighbors": 8,
+# the set-up before the colour blobs' views (issue 12 session 33): the scan's windows alone, the turned views' whole
+# canvases, the pyramid step it had then; every earlier set-up below also scanned so
+UAV_BEFORE_BLOBS = {"blob_views": False, "turned_crop": 0.0, "scale_factor": 1.2}
+UAV_CASCADE_ONLY = {**UAV_BEFORE_BLOBS, "verifier": "", "box_regressor": "", "low_confidence_band": 0.0, "min_neighbors": 8,
                     "containment": 0.4, "box_scale": 0.9}
 # the set-up before the box regressor (session 8): the verifier on the groups' mean boxes, its operating point
-UAV_VERIFIER_ONLY = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217, "box_regressor": "",
+UAV_VERIFIER_ONLY = {**UAV_BEFORE_BLOBS, "verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217, "box_regressor": "",
                      "min_neighbors": 3, "containment": 0.4, "box_scale": 0.9}
 # the set-up before the tree verifier (session 9): the logistic verifier, with the box regressor
-UAV_LOGISTIC = {"verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217,
+UAV_LOGISTIC = {**UAV_BEFORE_BLOBS, "verifier": "uav_vehicles_verifier.json", "verifier_threshold": 1.217,
                 "box_regressor": "uav_vehicles_box_regressor.json"}
 # the set-up before the box regressor's image stages (session 12): its member statistics alone
-UAV_MEMBER_BOXES = {"box_regressor": "uav_vehicles_box_regressor.json"}
+UAV_MEMBER_BOXES = {**UAV_BEFORE_BLOBS, "box_regressor": "uav_vehicles_box_regressor.json"}
 # the upright set-up at this altitude: upright 3:2 windows, vehicles at any heading in them
 UAV_UPRIGHT = {"model": "uav_vehicles_low.json", "min_size": 36.0, "max_size": 180.0, "min_neighbors": 64,
                "window_margin": 1.0, "group_iou": 0.2, "containment": 0.4, "box_scale": 0.9}

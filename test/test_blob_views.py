@@ -1,0 +1,116 @@
+"""Colour blobs as extra cascade views (multi_target_tracker/blob_views.py) and their place in the detector."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from aircraft_docking_tracker.config import ConfigError, package_config_dir, validate
+from aircraft_docking_tracker.offline import build_processor
+from aircraft_docking_tracker.scenarios.uav import (UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
+                                                    UavSceneConfig)
+from multi_target_tracker.blob_views import MAX_BLOBS, Blob, blob_view, colour_blobs, window_height
+from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError
+
+GROUND = (70, 140, 90)       # BGR: a green field
+PAINT = (190, 70, 40)        # a blue car
+ASPECT, CONTEXT = 2.0, 1.25  # the UAV model's 48x24 window and its chips' context
+SETUP = package_config_dir() / "uav_camera.yaml"
+
+
+def _field(shape=(480, 640)) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    noise = rng.normal(0, 3, (*shape, 3))
+    return np.clip(np.array(GROUND, float) + noise, 0, 255).astype(np.uint8)
+
+
+def _car(image, centre, size, angle, colour=PAINT):
+    corners = cv2.boxPoints((centre, size, angle)).astype(np.int32)
+    cv2.fillPoly(image, [corners], colour)
+    return image
+
+
+def _axis_difference(a: float, b: float) -> float:
+    """Angle between two undirected axes [deg], in [0, 90]."""
+    d = abs(a - b) % 180.0
+    return min(d, 180.0 - d)
+
+
+@pytest.mark.parametrize("angle", [0.0, 17.0, 45.0, 71.0, 100.0, 152.0])
+def test_a_painted_rectangle_is_one_blob_with_its_centre_axis_and_sides(angle):
+    image = _car(_field(), (300.0, 250.0), (90.0, 40.0), angle)
+    blobs = colour_blobs(image, 122.0, 0.5, ASPECT, CONTEXT, 25.0, 106.0)
+    blob = blobs[0]                                      # the best filled
+    assert abs(blob.x - 300) < 3 and abs(blob.y - 250) < 3
+    assert abs(blob.length - 90) < 5 and abs(blob.width - 40) < 5    # its pixels' centres: about a pixel short
+    assert _axis_difference(blob.angle, angle) < 4
+    assert 0.85 < blob.fill <= 1.1
+    for other in blobs[1:]:     # the car with the ground next to it (its colour leaks into that ground's mean)
+        assert abs(other.x - 300) < 4 and abs(other.y - 250) < 4 and other.length > blob.length
+
+
+def test_a_patch_that_does_not_fill_its_rectangle_or_is_too_small_is_not_a_blob():
+    image = _field()
+    triangle = np.array([[100, 100], [190, 100], [100, 150]], np.int32)    # fills half its rectangle
+    cv2.fillPoly(image, [triangle], PAINT)
+    _car(image, (450.0, 120.0), (12.0, 6.0), 30.0)                         # far below the smallest window
+    assert colour_blobs(image, 122.0, 0.6, ASPECT, CONTEXT, 25.0, 106.0) == []
+    loose = colour_blobs(image, 122.0, 0.3, ASPECT, CONTEXT, 25.0, 106.0)   # a looser fill takes the triangle
+    assert len(loose) >= 1 and all(abs(b.x - 130) < 20 and abs(b.y - 117) < 20 for b in loose)
+    assert colour_blobs(image, 122.0, 0.3, ASPECT, CONTEXT, 25.0, 40.0) == []   # its window above the range
+
+
+def test_blobs_are_capped_best_filled_first():
+    image = np.full((960, 1280, 3), GROUND, np.uint8)
+    for k in range(80):
+        _car(image, (60.0 + 130 * (k % 10), 60.0 + 110 * (k // 10)), (60.0, 30.0), 0.0)
+    assert len(colour_blobs(image, 122.0, 0.5, ASPECT, CONTEXT, 25.0, 106.0)) == MAX_BLOBS
+
+
+def test_the_blob_view_lays_the_blob_along_the_window_at_the_chips_scale():
+    """The canvas shows the blob along the model window's x axis, centred, at the scale whose window frames it as
+    the training chips framed a vehicle (length x width reshaped to the window's 2:1, enlarged 1.25x)."""
+    angle = 33.0
+    image = cv2.cvtColor(_car(_field(), (320.0, 240.0), (96.0, 44.0), angle), cv2.COLOR_BGR2GRAY)
+    blob = Blob(320.0, 240.0, 96.0, 44.0, angle, 1.0)
+    canvas, scale, back = blob_view(image, blob, (48, 24), CONTEXT)
+    height = window_height(blob, ASPECT, CONTEXT)
+    assert scale == pytest.approx(height / 24)
+    assert height == pytest.approx(np.sqrt(96 * 44 / 2) * 1.25)
+    painted = np.argwhere(canvas < 80)                              # the car is darker than the field in grey
+    (y0, x0), (y1, x1) = painted.min(axis=0), painted.max(axis=0)
+    assert abs((x1 - x0) - 96) <= 3 and abs((y1 - y0) - 44) <= 3    # along x now
+    centre = np.array(canvas.shape[::-1]) / 2
+    assert np.allclose([(x0 + x1) / 2, (y0 + y1) / 2], centre, atol=2)
+    assert np.allclose(back @ [*centre, 1.0], [320, 240], atol=1e-6)   # the canvas centre is the blob's
+
+
+def test_blob_views_need_colour_images_and_the_cascade_backend():
+    with pytest.raises(ConfigError):
+        validate(DetectorConfig(blob_views=True, backend="opencv", model="haarcascade_car.xml"))
+    detector = Detector(DetectorConfig(blob_views=True))
+    assert detector.needs_colour
+    with pytest.raises(DetectorError, match="BGR"):
+        detector.detect(np.zeros((120, 160), np.uint8))
+    assert detector.detect(np.zeros((120, 160, 3), np.uint8)).size == 0
+
+
+def test_blob_views_add_windows_around_the_blobs_and_leave_the_scan_alone():
+    """With blob views the raw windows are the scan's, unchanged and first, then those of the blobs' views, each
+    about a blob (a frame of a tuning scene through the UAV set-up, with and without them)."""
+    frame = next(iter(UavScene(UavSceneConfig(frames=80, fps=10.0, ground_resolution=UAV_SETUP_GROUND_RESOLUTION),
+                               seed=UAV_TUNING_SEEDS[0]).frames()))
+    plain = build_processor("detector", SETUP, {"blob_views": False}).detector
+    viewed = build_processor("detector", SETUP, {"blob_views": True}).detector
+    boxes, scores = plain.raw(frame.image)
+    more_boxes, more_scores = viewed.raw(frame.image)
+    n = len(boxes)
+    assert len(more_boxes) > n
+    assert np.array_equal(more_boxes[:n], boxes) and np.array_equal(more_scores[:n], scores)
+    cfg = viewed.config
+    blobs = colour_blobs(frame.image, cfg.blob_background, cfg.blob_min_fill, 2.0, cfg.blob_context,
+                         viewed.min_size, viewed.max_size)
+    centres = more_boxes[n:, :2] + more_boxes[n:, 2:] / 2
+    nearest = np.hypot(*(centres[:, None] - [(b.x, b.y) for b in blobs]).transpose(2, 0, 1)).min(axis=1)
+    reach = max(b.length for b in blobs)
+    assert (nearest < reach).all()
