@@ -31,6 +31,7 @@ MSER_DELTA = 5          # grey-level step over which a region must keep its area
 MSER_MAX_VARIATION = 0.25
 DISTANCE_GAIN = 3.0     # Lab distance -> 8-bit map (a Lab distance of 85 saturates)
 MAX_ASPECT = 4.5        # longer over shorter side of a blob's rectangle
+MIN_SIDE = 5            # the half-size frame's shortest side MSER takes [px]
 MAX_BLOBS = 64          # blobs looked at per frame, best filled first: bounds the work on a cluttered frame
 PAD = 0.3               # canvas margin around the blob's window on every side, as a fraction of its width
 STRIDE = 4              # window step in the blob views (texture-level pixels): 2-3 positions on each side
@@ -69,7 +70,10 @@ def _pairs(diff: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def colour_blobs(bgr: np.ndarray, background: float, min_fill: float, window_aspect: float, context: float,
                  min_size: float, max_size: float) -> list[Blob]:
     """The frame's colour blobs (module docstring, step 1) whose window height (:func:`window_height`) lies in
-    ``[min_size, max_size]`` px (0: unbounded), best filled first, at most :data:`MAX_BLOBS`."""
+    ``[min_size, max_size]`` px (0: unbounded), best filled first, at most :data:`MAX_BLOBS`. A frame too small for
+    MSER at half its size has none."""
+    if min(bgr.shape[:2]) * SCALE < MIN_SIDE:
+        return []
     distance = distance_map(bgr, background)
     lo = (min_size / context) ** 2 * window_aspect * SCALE ** 2 if min_size > 0 else 16.0
     hi = (max_size / context) ** 2 * window_aspect * SCALE ** 2 if max_size > 0 else distance.size / 4

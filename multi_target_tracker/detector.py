@@ -14,7 +14,11 @@ With ``angles`` (default ``[0]``) the frame is also scanned turned by each angle
 (:func:`turned_view`, on a canvas that holds all of it): a model trained on heading-aligned vehicles
 (the UAV set-up's) then meets vehicles at any heading within half an angle step of one of its views;
 each window of a turned view is mapped back as the upright box of its turned corners
-(:func:`map_back`), the box the ground truth gives a turned vehicle, before grouping.
+(:func:`map_back`), the box the ground truth gives a turned vehicle, before grouping. ``turned_crop`` scans only
+the central square of each turned view's canvas (half of a 45-degree canvas is reflected border).
+With ``blob_views`` each colour blob of the frame (:mod:`blob_views`) is scanned too, on its own canvas turned onto
+the window's axis at the one scale that frames it as the model's training chips framed a vehicle; its windows join
+the scan's before grouping, so a vehicle between the fixed headings or grid positions still gathers a group.
 
 Grouping (:func:`group_windows`, after OpenCV's ``groupRectangles``): a cascade fires on many
 windows around one object, shifted by the stride and a scale step. Windows are taken best

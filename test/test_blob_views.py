@@ -93,6 +93,8 @@ def test_blob_views_need_colour_images_and_the_cascade_backend():
     with pytest.raises(DetectorError, match="BGR"):
         detector.detect(np.zeros((120, 160), np.uint8))
     assert detector.detect(np.zeros((120, 160, 3), np.uint8)).size == 0
+    for shape in ((1, 1, 3), (2, 3, 3), (7, 5, 3), (9, 12, 3), (10, 10, 3)):   # too small for any blob
+        assert detector.detect(np.zeros(shape, np.uint8)).size == 0
 
 
 def test_blob_views_add_windows_around_the_blobs_and_leave_the_scan_alone():
