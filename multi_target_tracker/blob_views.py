@@ -39,8 +39,8 @@ STRIDE = 4              # window step in the blob views (texture-level pixels): 
 
 @dataclass(frozen=True)
 class Blob:
-    """A colour patch: centre (x, y), length along its axis, width across it [px], and the axis' angle [deg,
-    image x towards y]."""
+    """A colour patch: centre (x, y), length along its axis, width across it [px], the axis' angle [deg, image x
+    towards y], and the share of that rectangle its pixels fill."""
 
     x: float
     y: float
