@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from multi_target_tracker.heading import chip_height, turned_canvas
+
 SCALE = 0.5             # the blobs are looked for at half the frame's size (vehicles >= 25 px stay >= 12 px)
 MSER_DELTA = 5          # grey-level step over which a region must keep its area (OpenCV's default)
 MSER_MAX_VARIATION = 0.25
@@ -108,9 +110,9 @@ def _distinct(blobs: list[Blob]) -> list[Blob]:
 
 
 def window_height(blob: Blob, window_aspect: float, context: float) -> float:
-    """Height [px] of the model window that frames ``blob`` as the training chips framed a vehicle: its length x
-    width reshaped to the window's aspect (same area), enlarged ``context`` times."""
-    return float(np.sqrt(blob.length * blob.width / window_aspect) * context)
+    """Height [px] of the model window that frames ``blob`` as the training chips framed a vehicle
+    (:func:`heading.chip_height`)."""
+    return chip_height(blob.length, blob.width, window_aspect, context)
 
 
 def blob_view(gray: np.ndarray, blob: Blob, window: tuple[int, int], context: float):
@@ -121,7 +123,5 @@ def blob_view(gray: np.ndarray, blob: Blob, window: tuple[int, int], context: fl
     width = height * w0 / h0
     pad = PAD * width
     size = (int(round(width + 2 * pad)), int(round(height + 2 * pad)))
-    turn = cv2.getRotationMatrix2D((blob.x, blob.y), blob.angle, 1.0)
-    turn[:, 2] += (size[0] / 2 - blob.x, size[1] / 2 - blob.y)
-    canvas = cv2.warpAffine(gray, turn, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    canvas, turn = turned_canvas(gray, (blob.x, blob.y), blob.angle, size)
     return canvas, height / h0, cv2.invertAffineTransform(turn)

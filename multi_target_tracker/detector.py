@@ -62,6 +62,7 @@ from aircraft_docking_tracker.object_table import DETECTION_DTYPE, FLAGGED_DETEC
 from multi_target_tracker import blob_views
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
+from multi_target_tracker.heading import turned_canvas
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
 from multi_target_tracker.verifier import TreeVerifier, Verifier, VerifierError, features, load_verifier_model
 
@@ -278,6 +279,11 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     return image
 
 
+def is_bgr(image: np.ndarray) -> bool:
+    """Whether ``image`` is a three-channel (BGR) image, what the colour verifier and the blob views read."""
+    return image.ndim == 3 and image.shape[2] == 3
+
+
 def window_scales(window: tuple[int, int], frame_size: tuple[int, int], scale_factor: float,
                   min_size: float = 0.0, max_size: float = 0.0) -> list[float]:
     """Scales ``s`` (window = ``s * window`` px) from ``min_size`` to ``max_size`` heights that fit the frame."""
@@ -312,9 +318,7 @@ def turned_view(gray: np.ndarray, angle: float, border: int = 0,
     if crop > 0:
         side = int(round(crop * np.sqrt(w * h)))
         size = (min(size[0], side), min(size[1], side))
-    turn = cv2.getRotationMatrix2D((w / 2, h / 2), float(angle), 1.0)
-    turn[:, 2] += (size[0] / 2 - w / 2, size[1] / 2 - h / 2)
-    view = cv2.warpAffine(gray, turn, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    view, turn = turned_canvas(gray, (w / 2, h / 2), angle, size)
     return view, cv2.invertAffineTransform(turn)
 
 
@@ -527,8 +531,11 @@ class Detector:
     def raw(self, image: np.ndarray, last_stage_margin: float | None = None):
         """Ungrouped windows ``(boxes, scores)`` in ``image``'s pixels (grey, or BGR: ``blob_views`` needs colour),
         both orientations if configured, and the windows of the colour blobs' views with ``blob_views``."""
+        return self._raw(image, to_gray(image), last_stage_margin)
+
+    def _raw(self, image: np.ndarray, gray: np.ndarray, last_stage_margin: float | None):
+        """:meth:`raw` of ``image`` whose grey version ``gray`` the caller has already."""
         cfg = self.config
-        gray = to_gray(image)
         margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
         views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         if self.cascade is not None:   # every (view, level) is one job; merged in job order either way
@@ -559,7 +566,7 @@ class Detector:
 
     def blob_canvases(self, image: np.ndarray, gray: np.ndarray) -> list[tuple[np.ndarray, float, np.ndarray]]:
         """``(canvas, scale, canvas-to-frame affine)`` of each colour blob of ``image`` (:mod:`blob_views`)."""
-        if not (image.ndim == 3 and image.shape[2] == 3):
+        if not is_bgr(image):
             raise DetectorError(f"blob_views needs a BGR image, got shape {image.shape}")
         cfg = self.config
         aspect = self.window[0] / self.window[1]
@@ -571,17 +578,18 @@ class Detector:
         """Detections in ``image`` (grey or BGR uint8; BGR with a verifier or blob views), best score first."""
         cfg = self.config
         gray = to_gray(image)
-        if self.needs_colour and not (image.ndim == 3 and image.shape[2] == 3):
+        if self.needs_colour and not is_bgr(image):
             raise DetectorError(f"the colour verifier and blob_views need a BGR image, got shape {image.shape}")
         x0, y0 = 0, 0
         rx, ry, rw, rh = (int(v) for v in cfg.roi)
         if rw > 0 and rh > 0:
             x0, y0 = max(0, rx), max(0, ry)
-            if image[y0:ry + rh, x0:rx + rw].size == 0:
-                raise DetectorError(f"roi {cfg.roi} lies outside the {image.shape[1]}x{image.shape[0]} frame")
+            frame_width, frame_height = image.shape[1], image.shape[0]
             gray, image = gray[y0:ry + rh, x0:rx + rw], image[y0:ry + rh, x0:rx + rw]
+            if gray.size == 0:
+                raise DetectorError(f"roi {cfg.roi} lies outside the {frame_width}x{frame_height} frame")
         try:
-            boxes, scores = self.raw(image if self.needs_colour else gray, last_stage_margin)
+            boxes, scores = self._raw(image, gray, last_stage_margin)
         except FeatureError as exc:
             raise DetectorError(str(exc)) from exc
         low = None

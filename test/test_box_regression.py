@@ -112,7 +112,7 @@ def test_a_box_regressor_without_the_verifier_moves_the_groups_and_keeps_their_s
     detectors = [Detector(DetectorConfig(min_neighbors=2, containment=1.0, window_margin=1.0, **extra))
                  for extra in ({"box_regressor": ""}, {"box_regressor": str(regressor)})]
     for det in detectors:
-        det.raw = lambda gray, margin: (windows, margins)
+        det._raw = lambda image, gray, margin: (windows, margins)   # the scan behind detect()
     plain, moved = detectors
     assert plain.box_regressor is None and moved.box_regressor is not None
     a, b = plain.detect(image), moved.detect(image)
@@ -247,6 +247,6 @@ def _without_and_with(verifier, regressor):
     for extra in ({}, {"box_regressor": str(regressor)}):
         det = Detector(validate(DetectorConfig(model="uav_vehicles_heading_all_views.json", verifier=str(verifier),
                                                min_neighbors=2, containment=1.0, window_margin=1.0, **extra)))
-        det.raw = lambda gray, margin: (windows, margins)
+        det._raw = lambda image, gray, margin: (windows, margins)   # the scan behind detect()
         found.append(det.detect(image))
     return found

@@ -42,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UavScene, UavSceneConfig, detection_truth)
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
+from multi_target_tracker.heading import chip_height, turned_canvas  # noqa: E402
 
 WINDOW_ASPECT = 1.5
 HEADING_ASPECT = 2.0
@@ -61,13 +62,10 @@ def vehicle_axes(scene: UavScene, vehicle: int, t: int, homography: np.ndarray):
 def heading_chip(image: np.ndarray, centre, length: float, width: float, heading: float, context: float):
     """``image`` turned about ``centre`` by ``heading`` (the vehicle along x), cut twice the window box's size
     around it: ``(chip, box x, y, w, h in the chip)``."""
-    area = length * width
-    bh = np.sqrt(area / HEADING_ASPECT) * context
+    bh = chip_height(length, width, HEADING_ASPECT, context)
     bw = HEADING_ASPECT * bh
     cw, ch = int(round(2 * bw)), int(round(2 * bh))
-    turn = cv2.getRotationMatrix2D((float(centre[0]), float(centre[1])), heading, 1.0)
-    turn[:, 2] += (cw / 2 - centre[0], ch / 2 - centre[1])
-    chip = cv2.warpAffine(image, turn, (cw, ch), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    chip, _ = turned_canvas(image, centre, heading, (cw, ch))
     return chip, np.array([(cw - bw) / 2, (ch - bh) / 2, bw, bh])
 
 
