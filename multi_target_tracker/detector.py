@@ -102,7 +102,8 @@ class DetectorConfig:
                              "distance from the ground around it, rectangle-shaped) along its own axis, at the one "
                              "scale that frames it as the model's training chips framed a vehicle; its windows join "
                              "the scan's before grouping (blob_views.py; needs colour images and a model trained on "
-                             "heading-aligned objects: the UAV set-up's)")
+                             "objects along its window: the UAV set-up's heading-aligned chips, the drone-view "
+                             "model's boxes)")
     blob_background: float = param(122.0, "side of the square around each pixel whose mean colour is its ground, "
                                    "for blob_views [px]", low=8.0, high=2000.0)
     blob_min_fill: float = param(0.5, "share of its rotated bounding rectangle a colour region must fill to be a "
@@ -110,6 +111,9 @@ class DetectorConfig:
     blob_context: float = param(1.25, "the blob's window holds its length x width (reshaped to the window's aspect) "
                                 "enlarged this many times: the context of the model's training chips (blob_views)",
                                 low=1.0, high=4.0)
+    blob_scale: float = param(0.5, "the blobs are looked for at this share of the frame's size (blob_views; the "
+                              "cost goes with its square: keep the smallest wanted blob's width above ~8 px there)",
+                              low=0.05, high=1.0)
     turned_crop: float = param(0.0, "scan only the central square of each turned view (angles other than 0), of "
                                "this many times the square root of the frame's area a side (a 640x480 frame turned "
                                "45 degrees fills half of its 792-px canvas; 1.1: a 610-px square, 0.59 of the "
@@ -571,7 +575,7 @@ class Detector:
         cfg = self.config
         aspect = self.window[0] / self.window[1]
         blobs = blob_views.colour_blobs(image, cfg.blob_background, cfg.blob_min_fill, aspect, cfg.blob_context,
-                                        self.min_size, self.max_size)
+                                        self.min_size, self.max_size, cfg.blob_scale)
         return [blob_views.blob_view(gray, blob, self.window, cfg.blob_context) for blob in blobs]
 
     def detect(self, image: np.ndarray, last_stage_margin: float | None = None) -> np.ndarray:

@@ -49,6 +49,22 @@ def test_a_painted_rectangle_is_one_blob_with_its_centre_axis_and_sides(angle):
         assert abs(other.x - 300) < 4 and abs(other.y - 250) < 4 and other.length > blob.length
 
 
+@pytest.mark.parametrize("angle", [0.0, 30.0, 118.0])
+def test_a_quarter_size_search_finds_the_same_rectangle_at_a_quarter_of_the_cost(angle):
+    """``scale`` 0.25 (the drone-view set-up's ``blob_scale``): the same blob, its sides a few pixels coarser (the
+    pixels' centres of a 4x smaller map: about 4 px short), over a quarter of the pixels."""
+    image = _car(_field(), (300.0, 250.0), (90.0, 40.0), angle)
+    half = colour_blobs(image, 122.0, 0.5, ASPECT, 1.0, 32.0, 90.0)[0]
+    quarter = colour_blobs(image, 122.0, 0.5, ASPECT, 1.0, 32.0, 90.0, scale=0.25)[0]
+    # centres within the small map's pixel (colour_blobs maps its pixel i to i / scale: 1.5 px up-left at a quarter)
+    assert abs(half.x - 300) < 2 and abs(half.y - 250) < 2 and abs(quarter.x - 300) < 3 and abs(quarter.y - 250) < 3
+    assert abs(quarter.length - 90) < 9 and abs(quarter.width - 40) < 9
+    assert _axis_difference(quarter.angle, angle) < 6
+    small = _car(_field(), (300.0, 250.0), (24.0, 12.0), angle)     # 6 x 3 px at a quarter: still its rectangle
+    blob = colour_blobs(small, 122.0, 0.5, ASPECT, 1.0, 8.0, 90.0, scale=0.25)[0]
+    assert abs(blob.x - 300) < 3 and abs(blob.y - 250) < 3 and abs(blob.length - 24) < 6 and abs(blob.width - 12) < 6
+
+
 def test_a_patch_that_does_not_fill_its_rectangle_or_is_too_small_is_not_a_blob():
     image = _field()
     triangle = np.array([[100, 100], [190, 100], [100, 150]], np.int32)    # fills half its rectangle
@@ -116,3 +132,4 @@ def test_blob_views_add_windows_around_the_blobs_and_leave_the_scan_alone():
     nearest = np.hypot(*(centres[:, None] - [(b.x, b.y) for b in blobs]).transpose(2, 0, 1)).min(axis=1)
     reach = max(b.length for b in blobs)
     assert (nearest < reach).all()
+
