@@ -52,7 +52,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
+from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir  # noqa: E402
 from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
 from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccumulator  # noqa: E402
 from aircraft_docking_tracker.evaluation.plots import grouped_bars  # noqa: E402
@@ -90,19 +90,35 @@ def train_models(out_dir: Path, quick: bool) -> dict:
     return seconds
 
 
+#: the drone-view set-up's scan where config/detector.yaml sets it beyond the dataclass defaults: the colour blobs'
+#: views (issue 12, session 34). Every drone-view figure below scans as the node does; the tiles are read in colour.
+SETUP_SCAN = {key: value for key, value in load_yaml_parameters(package_config_dir() / "detector.yaml",
+                                                                "detector").items() if key.startswith("blob_")}
+
+
 def detector_for(model: Path, **overrides) -> Detector:
-    """Node defaults (the window-size range the model was trained for), with ``overrides``."""
-    return Detector(DetectorConfig(model=str(model), **overrides))
+    """Node defaults (the window-size range the model was trained for, config/detector.yaml's scan), with
+    ``overrides``."""
+    return Detector(DetectorConfig(model=str(model), **{**SETUP_SCAN, **overrides}))
+
+
+def colour(item) -> np.ndarray:
+    """A drone-view tile (``read_yolo_folder`` item) in colour, as a camera gives it (the blob views read colour)."""
+    image = cv2.imread(str(TILES / "images" / item.name), cv2.IMREAD_COLOR)
+    if image is None:
+        raise SystemExit(f"cannot read {item.name} in {TILES / 'images'}")
+    return image
 
 
 def evaluate(det: Detector, items) -> tuple[dict, dict]:
     """Accumulated metrics with border-cut boxes ignored, and over all boxes."""
     ignore_cut, all_boxes = DetectionAccumulator(), DetectionAccumulator()
     for item in items:
-        gray = item.load()
-        table = det.detect(gray)
+        image = colour(item)
+        table = det.detect(image)
         boxes = np.column_stack([table["x"], table["y"], table["w"], table["h"]])
-        ignore_cut.add_frame(boxes, table["score"], item.boxes, truncated(item.boxes, gray.shape[::-1], BORDER_MARGIN))
+        ignore_cut.add_frame(boxes, table["score"], item.boxes,
+                             truncated(item.boxes, image.shape[1::-1], BORDER_MARGIN))
         all_boxes.add_frame(boxes, table["score"], item.boxes)
     return ignore_cut.summary(), all_boxes.summary()
 
@@ -200,9 +216,9 @@ def raw_windows(model: Path, items, margin: float = min(GRID_MARGIN)):
     det = detector_for(model, window_margin=margin)
     out = []
     for item in items:
-        gray = item.load()
-        boxes, scores = det.raw(gray)
-        out.append((boxes, scores, item.boxes, truncated(item.boxes, gray.shape[::-1], BORDER_MARGIN)))
+        image = colour(item)
+        boxes, scores = det.raw(image)
+        out.append((boxes, scores, item.boxes, truncated(item.boxes, image.shape[1::-1], BORDER_MARGIN)))
     return det.config, out
 
 
@@ -443,7 +459,7 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
         items = fold_tiles(held, 3)
         _, raws = raw_windows(model, items)
         raws_by_fold.append(raws)
-        sizes_by_fold.append([item.load().shape[::-1] for item in items])
+        sizes_by_fold.append([colour(item).shape[1::-1] for item in items])
         models.append(model.name)
         print(f"[box regression seed {seed}] fold {k}: {len(raws)} tiles", flush=True)
     groups = member_groups(raws_by_fold, sizes_by_fold)
@@ -509,7 +525,7 @@ def regressor_speed(regressor: Path, rounds: int = 5, frames: int = 12) -> dict:
     latency is its best over the rounds (the shared machine's load spikes hit one arm's round, not every round)."""
     cv2.setNumThreads(1)
     validation = read_yolo_folder(TILES, include=VALIDATION)[::3]
-    crops = [item.load()[80:560] for item in validation[:frames]]
+    crops = [colour(item)[80:560] for item in validation[:frames]]
     arms = {"mean box": detector_for(MODELS_DIR / model_name("fused")),
             "regressed": detector_for(MODELS_DIR / model_name("fused"), box_regressor=str(regressor))}
     latencies = {name: np.full((rounds, len(crops)), np.inf) for name in arms}
@@ -628,6 +644,7 @@ def main() -> int:
         results = json.loads((HERE / "results" / "detector.json").read_text())
         if args.save_regressor:
             regressor.info["for_models"] = [model_name("fused")]    # the detector refuses it with another model
+            regressor.info["scan"] = SETUP_SCAN                      # the windows it was trained on
             regressor.save(args.save_regressor)
             print(f"wrote {args.save_regressor}: {regressor.info['samples']} groups")
             results.setdefault("box_regression", {})["speed_640x480"] = regressor_speed(Path(args.save_regressor))
@@ -672,12 +689,12 @@ def main() -> int:
         train_seconds = train_models(models_dir, args.quick)
     validation = read_yolo_folder(TILES, include=VALIDATION)
     validation = validation[::8 if args.quick else 3]   # every 3rd tile: the contour-only cascade is slow
-    tiles = [item.load() for item in validation[:6 if args.quick else 12]]
+    tiles = [colour(item) for item in validation[:6 if args.quick else 12]]
     crops = [t[80:560] for t in tiles]
     wide = []
     chase = DATA / "sot" / "CarChase2" / "img"
     if chase.is_dir():
-        wide = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted(chase.iterdir())[:3 if args.quick else 8]]
+        wide = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in sorted(chase.iterdir())[:3 if args.quick else 8]]
 
     results = {"validation_prefixes": VALIDATION, "validation_tiles": len(validation), "quick": args.quick,
                "train_seconds": train_seconds, "models_dir": str(models_dir), "detectors": {}}
@@ -918,7 +935,9 @@ def box_regression_markdown(runs: dict) -> list[str]:
             "those tiles are the fold's training tiles, scored by models that did not train on them, but those models "
             "saw the held-out fold's tiles: the crossfit leak of the inner choice). The grouping is chosen by rule "
             "`worst-fold` over the inner folds, each refined by a regressor trained without it and without the "
-            "held-out fold. *Node defaults*: min_neighbors / window_margin of config/detector.yaml. *Transferred*: "
+            "held-out fold. Every model scans as the drone-view set-up does (config/detector.yaml: since session 34 "
+            f"also the colour blobs' views, {SETUP_SCAN}), and the regressors learn from those windows. "
+            "*Node defaults*: min_neighbors / window_margin of config/detector.yaml. *Transferred*: "
             "fold k of a seed-1 or seed-2 model scored with the regressor trained on the *seed-0* models' groups "
             "without fold k: a regressor on the windows of a model it was not trained with, on tiles it did not see "
             "(the shipped regressor is the seed-0 one trained on all four folds, used with the shipped model, which "

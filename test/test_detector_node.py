@@ -52,9 +52,11 @@ def test_yaml_lists_every_parameter_with_its_default():
     expected = {f.name: getattr(DetectorConfig(), f.name) for f in dataclasses.fields(DetectorConfig)}
     expected.update({"node." + f.name: getattr(DetectorNodeConfig(), f.name)
                      for f in dataclasses.fields(DetectorNodeConfig)})
-    # the one setting of the file that is not the dataclass default: the drone-view model's box regressor (a
+    # the settings of the file that are not the dataclass defaults: the drone-view model's box regressor (a
     # default would break the opencv backend and every other model); test_box_regression checks that it loads
     expected["box_regressor"] = "drone_vehicles_box_regressor.json"
+    # ... and its scan: the colour blobs' views, framed as the drone-view model's boxes, looked for at a quarter size
+    expected.update({"blob_views": True, "blob_context": 1.0, "blob_scale": 0.25})
     assert params == expected
 
 
