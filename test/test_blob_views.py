@@ -7,12 +7,15 @@ import cv2
 import numpy as np
 import pytest
 
-from aircraft_docking_tracker.config import ConfigError, package_config_dir, validate
+from aircraft_docking_tracker.config import ConfigError, load_yaml_parameters, package_config_dir, validate
+from aircraft_docking_tracker.geometry import box_iou
 from aircraft_docking_tracker.offline import build_processor
 from aircraft_docking_tracker.scenarios.uav import (UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
                                                     UavSceneConfig)
 from multi_target_tracker.blob_views import MAX_BLOBS, Blob, blob_view, colour_blobs, window_height
 from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError
+from multi_target_tracker.train_cascade import read_yolo_folder, truncated
+from conftest import require_data
 
 GROUND = (70, 140, 90)       # BGR: a green field
 PAINT = (190, 70, 40)        # a blue car
@@ -139,9 +142,6 @@ def test_blob_views_add_windows_around_the_blobs_and_leave_the_scan_alone():
 def _turned_tiles(angle: float, every: int = 25, count: int = 8):
     """Drone-view tiles (prefixes 1_, 4_) turned by ``angle`` degrees about their centre, with the upright boxes of
     their labelled vehicles' turned corners (the vehicles the frame still holds whole)."""
-    from conftest import require_data   # noqa: PLC0415
-    from multi_target_tracker.train_cascade import read_yolo_folder, truncated   # noqa: PLC0415
-
     tiles = require_data("detect/drone-view-vehicles")
     for item in read_yolo_folder(tiles, include=["1_", "4_"])[::every][:count]:
         bgr = cv2.imread(str(tiles / "images" / item.name), cv2.IMREAD_COLOR)
@@ -161,9 +161,6 @@ def test_the_drone_view_setup_finds_vehicles_at_a_diagonal_heading(angle):
     a heading the upright scan's 64x32 windows (both orientations) overlap poorly: the set-up without the blob views
     finds 4 of 34 at 30 degrees and none at 45; with them 31 and 26 (session 34). The tiles were in the model's
     training, upright only (the held-out figures are bench/detector.py's prefix folds)."""
-    from aircraft_docking_tracker.config import load_yaml_parameters   # noqa: PLC0415
-    from aircraft_docking_tracker.geometry import box_iou   # noqa: PLC0415
-
     params = load_yaml_parameters(package_config_dir() / "detector.yaml", "detector")
     config = DetectorConfig(**{k: v for k, v in params.items() if "." not in k})
     assert config.blob_views
