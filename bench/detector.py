@@ -102,19 +102,11 @@ def detector_for(model: Path, **overrides) -> Detector:
     return Detector(DetectorConfig(model=str(model), **{**SETUP_SCAN, **overrides}))
 
 
-def colour(item) -> np.ndarray:
-    """A drone-view tile (``read_yolo_folder`` item) in colour, as a camera gives it (the blob views read colour)."""
-    image = cv2.imread(str(TILES / "images" / item.name), cv2.IMREAD_COLOR)
-    if image is None:
-        raise SystemExit(f"cannot read {item.name} in {TILES / 'images'}")
-    return image
-
-
 def evaluate(det: Detector, items) -> tuple[dict, dict]:
     """Accumulated metrics with border-cut boxes ignored, and over all boxes."""
     ignore_cut, all_boxes = DetectionAccumulator(), DetectionAccumulator()
     for item in items:
-        image = colour(item)
+        image = item.load_colour()
         table = det.detect(image)
         boxes = np.column_stack([table["x"], table["y"], table["w"], table["h"]])
         ignore_cut.add_frame(boxes, table["score"], item.boxes,
@@ -216,7 +208,7 @@ def raw_windows(model: Path, items, margin: float = min(GRID_MARGIN)):
     det = detector_for(model, window_margin=margin)
     out = []
     for item in items:
-        image = colour(item)
+        image = item.load_colour()
         boxes, scores = det.raw(image)
         out.append((boxes, scores, item.boxes, truncated(item.boxes, image.shape[1::-1], BORDER_MARGIN)))
     return det.config, out
@@ -459,7 +451,7 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
         items = fold_tiles(held, 3)
         _, raws = raw_windows(model, items)
         raws_by_fold.append(raws)
-        sizes_by_fold.append([colour(item).shape[1::-1] for item in items])
+        sizes_by_fold.append([item.load_colour().shape[1::-1] for item in items])
         models.append(model.name)
         print(f"[box regression seed {seed}] fold {k}: {len(raws)} tiles", flush=True)
     groups = member_groups(raws_by_fold, sizes_by_fold)
@@ -525,7 +517,7 @@ def regressor_speed(regressor: Path, rounds: int = 5, frames: int = 12) -> dict:
     latency is its best over the rounds (the shared machine's load spikes hit one arm's round, not every round)."""
     cv2.setNumThreads(1)
     validation = read_yolo_folder(TILES, include=VALIDATION)[::3]
-    crops = [colour(item)[80:560] for item in validation[:frames]]
+    crops = [item.load_colour()[80:560] for item in validation[:frames]]
     arms = {"mean box": detector_for(MODELS_DIR / model_name("fused")),
             "regressed": detector_for(MODELS_DIR / model_name("fused"), box_regressor=str(regressor))}
     latencies = {name: np.full((rounds, len(crops)), np.inf) for name in arms}
@@ -689,7 +681,7 @@ def main() -> int:
         train_seconds = train_models(models_dir, args.quick)
     validation = read_yolo_folder(TILES, include=VALIDATION)
     validation = validation[::8 if args.quick else 3]   # every 3rd tile: the contour-only cascade is slow
-    tiles = [colour(item) for item in validation[:6 if args.quick else 12]]
+    tiles = [item.load_colour() for item in validation[:6 if args.quick else 12]]
     crops = [t[80:560] for t in tiles]
     wide = []
     chase = DATA / "sot" / "CarChase2" / "img"

@@ -48,6 +48,14 @@ class LabelledImage:
     load: Callable[[], np.ndarray]
     boxes: np.ndarray
     ignore: np.ndarray | None = None   # boxes neither used as positives nor cut as negatives
+    path: Path | None = None           # the image file, for an image folder's items (None: from a bag)
+
+    def load_colour(self) -> np.ndarray:
+        """The image in colour (BGR uint8), as a camera gives it (the colour blobs' views read colour)."""
+        image = cv2.imread(str(self.path), cv2.IMREAD_COLOR) if self.path is not None else None
+        if image is None:
+            raise TrainingDataError(f"{self.name}: no colour image file to read ({self.path})")
+        return image
 
     def all_boxes(self) -> np.ndarray:
         return self.boxes if self.ignore is None or not len(self.ignore) else np.vstack([self.boxes, self.ignore])
@@ -97,7 +105,8 @@ def read_yolo_folder(folder: str | Path, include: list[str] | None = None, exclu
                     rows.append([float(v) for v in parts[1:5]])
         size = _image_size(image_path)
         boxes, ignore = (_yolo_boxes(r, size) for r in (rows, ignored))
-        out.append(LabelledImage(image_path.name, _imread_gray(image_path), boxes, ignore if len(ignore) else None))
+        out.append(LabelledImage(image_path.name, _imread_gray(image_path), boxes, ignore if len(ignore) else None,
+                                 image_path))
     if not out:
         raise TrainingDataError(f"no images in {images_dir} (after prefix filters)")
     return out
@@ -141,7 +150,7 @@ def read_voc_folder(folder: str | Path, include: list[str] | None = None, exclud
             bb = obj.find("bndbox")
             x0, y0, x1, y1 = (float(bb.findtext(k)) for k in ("xmin", "ymin", "xmax", "ymax"))
             rows.append([x0, y0, x1 - x0, y1 - y0])
-        out.append(LabelledImage(filename, _imread_gray(image_path), np.asarray(rows).reshape(-1, 4)))
+        out.append(LabelledImage(filename, _imread_gray(image_path), np.asarray(rows).reshape(-1, 4), path=image_path))
     if not out:
         raise TrainingDataError(f"no VOC annotations with images in {folder}")
     return out

@@ -144,7 +144,7 @@ def _turned_tiles(angle: float, every: int = 25, count: int = 8):
     their labelled vehicles' turned corners (the vehicles the frame still holds whole)."""
     tiles = require_data("detect/drone-view-vehicles")
     for item in read_yolo_folder(tiles, include=["1_", "4_"])[::every][:count]:
-        bgr = cv2.imread(str(tiles / "images" / item.name), cv2.IMREAD_COLOR)
+        bgr = item.load_colour()
         h, w = bgr.shape[:2]
         turn = cv2.getRotationMatrix2D((w / 2, h / 2), angle, 1.0)
         boxes = item.boxes[~truncated(item.boxes, (w, h), 1.5)]

@@ -137,7 +137,7 @@ def test_the_shipped_drone_view_setup_loads_its_regressor_and_moves_the_boxes_on
     items = read_yolo_folder(tiles, include=["1_", "4_"])[::25][:8]
     moved, iou_plain, iou_shipped = [], [], []
     for item in items:
-        bgr = cv2.imread(str(tiles / "images" / item.name), cv2.IMREAD_COLOR)    # the set-up's blob views read colour
+        bgr = item.load_colour()    # the set-up's blob views read colour
         counted = item.boxes[~truncated(item.boxes, bgr.shape[1::-1], 1.5)]
         a, b = plain.detect(bgr), shipped.detect(bgr)
         boxes = [np.column_stack([t["x"], t["y"], t["w"], t["h"]]) for t in (a, b)]
