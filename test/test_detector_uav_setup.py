@@ -57,81 +57,101 @@ def test_uav_protocol_seed_ranges_are_disjoint():
     assert 106 not in ranges[0] | ranges[1]                             # the demo's seed is held out
 
 
-def _counts(detector, seed: int) -> tuple[int, int, int]:
-    """(vehicles counted, detections, true detections) on every 8th frame of a demo-like scene."""
+HELD_OUT = UAV_EVAL_SEEDS[900:904]
+
+
+@pytest.fixture(scope="module")
+def held_out_frames():
+    """Every 8th frame (image, ground truth) of four demo-like held-out scenes, rendered once for the module: the
+    tests compare several set-ups side by side on the very same frames."""
     config = UavSceneConfig(frames=80, fps=10.0, difficulty=1, ground_resolution=UAV_SETUP_GROUND_RESOLUTION)
+    return {seed: [(frame.image, frame.ground_truth) for k, frame in enumerate(UavScene(config, seed=seed).frames())
+                   if k % 8 == 4] for seed in HELD_OUT}
+
+
+@pytest.fixture(scope="module")
+def counts_of(held_out_frames):
+    """``counts_of(detector)``: (vehicles counted, detections, true detections) per held-out scene, an array of
+    shape (4, 3); remembered per detector configuration, as several tests count the same set-up."""
+    remembered = {}
+
+    def counts(detector: Detector) -> np.ndarray:
+        key = repr(detector.config)
+        if key not in remembered:
+            remembered[key] = np.array([_counts(detector, held_out_frames[seed]) for seed in HELD_OUT])
+        return remembered[key]
+    return counts
+
+
+def _counts(detector, frames) -> tuple[int, int, int]:
+    """(vehicles counted, detections, true detections) on one scene's frames."""
     acc = DetectionAccumulator()
-    for k, frame in enumerate(UavScene(config, seed=seed).frames()):
-        if k % 8 == 4:
-            table = confident_rows(detector.detect(frame.image))   # BGR: the set-up's colour verifier reads it
-            boxes, ignore = detection_truth(frame.ground_truth)
-            acc.add_frame(np.column_stack([table["x"], table["y"], table["w"], table["h"]]), table["score"],
-                          boxes, ignore)
+    for image, ground_truth in frames:
+        table = confident_rows(detector.detect(image))   # BGR: the set-up's colour verifier reads it
+        boxes, ignore = detection_truth(ground_truth)
+        acc.add_frame(np.column_stack([table["x"], table["y"], table["w"], table["h"]]), table["score"],
+                      boxes, ignore)
     s = acc.summary()
     return s["ground_truth"], s["detections"], s["true_positives"]
 
 
-def test_uav_setup_detects_the_vehicles_of_held_out_scenes(detector):
+def test_uav_setup_detects_the_vehicles_of_held_out_scenes(detector, counts_of):
     """Pooled over four held-out scenes (a scene at this altitude shows only a few vehicles at a time).
     Below issue 12's targets (see docs/uav_camera.md): the bounds say the set-up finds half the vehicles and is not
     drowned in false alarms, with margin under what bench/uav_detector.py measures; and that it beats
     the previous upright-window set-up side by side on both rates."""
-    counts = np.array([_counts(detector, seed) for seed in UAV_EVAL_SEEDS[900:904]])
+    counts = counts_of(detector)
     vehicles, detections, true = counts.sum(axis=0)
     assert vehicles >= 20, counts
     assert true / vehicles >= MIN_DETECTION, counts
     assert 1 - true / max(detections, 1) <= MAX_FALSE_ALARMS, counts
-    upright = np.array([_counts(Detector(DetectorConfig(**UPRIGHT)), seed) for seed in UAV_EVAL_SEEDS[900:904]])
+    upright = counts_of(Detector(DetectorConfig(**UPRIGHT)))
     u_vehicles, u_detections, u_true = upright.sum(axis=0)
     assert true / vehicles >= u_true / u_vehicles + 0.08, (counts, upright)
     assert 1 - true / max(detections, 1) <= 1 - u_true / max(u_detections, 1) - 0.1, (counts, upright)
 
 
-def test_the_colour_verifier_halves_the_cascades_false_alarms_on_held_out_scenes(detector):
+def test_the_colour_verifier_halves_the_cascades_false_alarms_on_held_out_scenes(detector, counts_of):
     """Side by side on the same held-out scenes: the verifier removes false groups (canopy, smoke) the window
     count cannot tell from vehicles, without losing detections (measured 0.19 against 0.38 false alarms,
     0.52 against 0.49 detection)."""
     cascade_only = Detector(dataclasses.replace(detector.config, **CASCADE_ONLY))
     assert detector.needs_colour and not cascade_only.needs_colour
-    seeds = UAV_EVAL_SEEDS[900:904]
-    vehicles, detections, true = np.array([_counts(detector, s) for s in seeds]).sum(axis=0)
-    c_vehicles, c_detections, c_true = np.array([_counts(cascade_only, s) for s in seeds]).sum(axis=0)
+    vehicles, detections, true = counts_of(detector).sum(axis=0)
+    c_vehicles, c_detections, c_true = counts_of(cascade_only).sum(axis=0)
     assert 1 - true / max(detections, 1) <= 1 - c_true / max(c_detections, 1) - 0.1
     assert true / vehicles >= c_true / c_vehicles - 0.05
 
 
-def _side_by_side(*detectors: Detector) -> list:
-    """(vehicles, detections, true detections) summed over four held-out scenes, for each detector."""
-    return [np.array([_counts(det, seed) for seed in UAV_EVAL_SEEDS[900:904]]).sum(axis=0) for det in detectors]
-
-
-def test_the_box_regressor_finds_more_vehicles_on_held_out_scenes(detector):
+def test_the_box_regressor_finds_more_vehicles_on_held_out_scenes(detector, counts_of):
     """Side by side on the same held-out scenes: the box regressor moves groups that lie on a vehicle at IoU
     0.3-0.5 onto it, so more vehicles are found without more false alarms (measured 0.64 against 0.52
     detection, 0.14 against 0.19 false alarms)."""
     before = Detector(dataclasses.replace(detector.config, **VERIFIER_ONLY))
     after = Detector(dataclasses.replace(detector.config, **BEFORE_BLOBS))      # the same scan's windows
     assert after.box_regressor is not None and before.box_regressor is None
-    (vehicles, detections, true), (b_vehicles, b_detections, b_true) = _side_by_side(after, before)
+    vehicles, detections, true = counts_of(after).sum(axis=0)
+    b_vehicles, b_detections, b_true = counts_of(before).sum(axis=0)
     assert vehicles == b_vehicles
     assert true >= b_true + 0.05 * vehicles, (true, b_true, vehicles)
     assert 1 - true / max(detections, 1) <= 1 - b_true / max(b_detections, 1) + 0.03
 
 
-def test_the_tree_verifier_finds_more_vehicles_at_fewer_false_alarms_on_held_out_scenes(detector):
+def test_the_tree_verifier_finds_more_vehicles_at_fewer_false_alarms_on_held_out_scenes(detector, counts_of):
     """Side by side on the same held-out scenes: boosted trees on the refined box's colour against the
     logistic verifier on the mean box's colour (on these four scenes measured 0.72 / 0.16 against 0.64 / 0.14:
     17 more of 192 vehicles at about the same false alarms; on bench/uav_detector.py's 13 held-out scenes
     0.69 / 0.15 against 0.58 / 0.18). Both with the member-statistics box regressor (the image stages came after)."""
     logistic = Detector(dataclasses.replace(detector.config, **LOGISTIC))
     trees = Detector(dataclasses.replace(detector.config, **MEMBER_BOXES))
-    (vehicles, detections, true), (l_vehicles, l_detections, l_true) = _side_by_side(trees, logistic)
+    vehicles, detections, true = counts_of(trees).sum(axis=0)
+    l_vehicles, l_detections, l_true = counts_of(logistic).sum(axis=0)
     assert vehicles == l_vehicles
     assert true >= l_true + 0.04 * vehicles, (true, l_true, vehicles)
     assert 1 - true / max(detections, 1) <= 1 - l_true / max(l_detections, 1) + 0.06
 
 
-def test_the_image_stages_cut_the_false_alarms_on_held_out_scenes(detector):
+def test_the_image_stages_cut_the_false_alarms_on_held_out_scenes(detector, counts_of):
     """Side by side on the same held-out scenes: the box regressor's image stages (issue 12 session 13) move
     published groups off a vehicle's edge onto it or onto a partly hidden (ignored) vehicle, so fewer detections lie
     off every vehicle, and about as many vehicles are found (measured 128 of 192 vehicles in 142 detections,
@@ -140,14 +160,15 @@ def test_the_image_stages_cut_the_false_alarms_on_held_out_scenes(detector):
     members = Detector(dataclasses.replace(detector.config, **MEMBER_BOXES))
     stages = Detector(dataclasses.replace(detector.config, **BEFORE_BLOBS))     # the same scan's windows
     assert stages.box_regressor.image_stages and not members.box_regressor.image_stages
-    (vehicles, detections, true), (m_vehicles, m_detections, m_true) = _side_by_side(stages, members)
+    vehicles, detections, true = counts_of(stages).sum(axis=0)
+    m_vehicles, m_detections, m_true = counts_of(members).sum(axis=0)
     assert vehicles == m_vehicles
     assert true >= m_true - 0.03 * vehicles, (true, m_true, vehicles)
     assert 1 - true / max(detections, 1) <= 1 - m_true / max(m_detections, 1) - 0.025, (true, detections, m_true,
                                                                                        m_detections)
 
 
-def test_the_colour_blobs_views_find_more_vehicles_on_held_out_scenes(detector):
+def test_the_colour_blobs_views_find_more_vehicles_on_held_out_scenes(detector, counts_of):
     """Side by side on the same held-out scenes: the windows of each colour blob's own view (issue 12 session 33)
     give groups on vehicles the fixed-heading scan gathers too few windows on, with the turned views cropped to pay
     for them (measured on these four scenes 137 of 192 vehicles in 153 detections, false alarms 0.105, against 128
@@ -155,25 +176,23 @@ def test_the_colour_blobs_views_find_more_vehicles_on_held_out_scenes(detector):
     docs/uav_camera.md)."""
     before = Detector(dataclasses.replace(detector.config, **BEFORE_BLOBS))
     assert detector.config.blob_views and not before.config.blob_views
-    (vehicles, detections, true), (b_vehicles, b_detections, b_true) = _side_by_side(detector, before)
+    vehicles, detections, true = counts_of(detector).sum(axis=0)
+    b_vehicles, b_detections, b_true = counts_of(before).sum(axis=0)
     assert vehicles == b_vehicles
     assert true >= b_true + 0.025 * vehicles, (true, b_true, vehicles)
     assert 1 - true / max(detections, 1) <= 1 - b_true / max(b_detections, 1) + 0.03, (true, detections, b_true,
                                                                                       b_detections)
 
 
-def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_unchanged(detector):
+def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_unchanged(detector, held_out_frames):
     """Groups the verifier scores within the band below its threshold are published flagged (their score, the
     verifier's probability, below the threshold's); the detections proper are the same with or without the band."""
     without = Detector(dataclasses.replace(detector.config, low_confidence_band=0.0))
     banded = Detector(dataclasses.replace(detector.config, low_confidence_band=2.0))
     threshold = detector.config.verifier_threshold
-    config = UavSceneConfig(frames=80, fps=10.0, difficulty=1, ground_resolution=UAV_SETUP_GROUND_RESOLUTION)
     flagged = 0
-    for k, frame in enumerate(UavScene(config, seed=UAV_EVAL_SEEDS[900]).frames()):
-        if k % 16 != 4:
-            continue
-        plain, table = without.detect(frame.image), banded.detect(frame.image)
+    for image, _ in held_out_frames[HELD_OUT[0]][::2]:                     # every 16th frame
+        plain, table = without.detect(image), banded.detect(image)
         assert LOW_CONFIDENCE not in plain.dtype.names and LOW_CONFIDENCE in table.dtype.names
         low = table[LOW_CONFIDENCE] == 1
         high = table[~low][list(plain.dtype.names)]
