@@ -118,7 +118,8 @@ def track_approach(job: tuple) -> dict:
     return {"seed": seed, "path": str(path)}
 
 
-GEAR_KEYS = ("gear_min_height_px", "gear_search", "gear_window", "gear_band", "gear_min_symmetry", "gear_min_contrast")
+GEAR_KEYS = ("gear_min_height_px", "gear_search", "gear_window", "gear_band", "gear_min_symmetry", "gear_min_contrast",
+             "gear_axes", "gear_axis_contrast")
 
 
 def measure_gears(job: tuple) -> str:

@@ -265,6 +265,32 @@ def test_nose_wheel_found_despite_a_quadrilateral_off_by_a_third(stop_frames):
     assert with_gear[:, 0].max() < 0.8 and np.median(quad_only[:, 0]) > 2 * np.median(with_gear[:, 0])
 
 
+def test_an_engine_as_symmetric_as_the_nose_gives_way_to_the_axis_with_the_tyre():
+    """Held-out approach 209's stand (clear, a vehicle and the jet bridge, the camera 5.3 m high and 49 m out), its
+    quadrilateral 0.3 of its height to the side, as the tracker had it in the last 15 m: the search's most
+    symmetric axis is then an engine's (140-170 px off, a step of 10-18 grey levels under it), and with it the
+    lateral offset was metres off. Looking at the next symmetric axes too (``gear_axes``), the first with a tyre's
+    step (``gear_axis_contrast``) is the nose's, within a pixel; where the most symmetric axis is the nose's,
+    nothing changes."""
+    scene = DockingScene(DockingSceneConfig(frames=60, weather="clear", occluder="both", growth=5.33, turn_deg=25.7,
+                                            difficulty=2, camera_height_m=5.3, camera_distance_m=49.1,
+                                            lateral_offset_m=1.0), seed=209)
+    stand = parse_stand(scene.stand_calibration())
+    alone = DockingGuidance(stand, GuidanceConfig(gear_axes=1))
+    axes = DockingGuidance(stand, GuidanceConfig(gear_axes=3))
+    engine = 0
+    for frame in scene.frames():
+        if frame.index < 46 or frame.index % 2:
+            continue
+        quad = _perturbed(frame.quad, -0.3, 0.0, 1.0)
+        first, looked = alone.measure_gear(frame.image, quad), axes.measure_gear(frame.image, quad)
+        assert abs(looked["axis_x"][0] - frame.nose[0]) < 1.0 and looked["contrast"][0] > 60
+        engine += abs(first["axis_x"][0] - frame.nose[0]) > 50
+        centred = _perturbed(frame.quad, 0.2, 0.0, 1.0)
+        assert alone.measure_gear(frame.image, centred).tolist() == axes.measure_gear(frame.image, centred).tolist()
+    assert engine >= 5                                 # measured: 7 of 7 frames on the engine
+
+
 def test_ground_contact_is_the_tyres_edge_with_a_joint_line_right_under_it():
     """A grey profile down the axis as measured on a bench stand (415, 12.3 m to go): the tyre (44) ends after
     row 7, a slab joint (114, 118) runs right under it, then the apron (140-150). The step's bands smear the edge

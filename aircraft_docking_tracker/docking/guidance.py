@@ -194,6 +194,13 @@ class GuidanceConfig:
     gear_min_symmetry: float = param(0.5, "the mirror correlation a symmetry axis needs", low=-1.0, high=1.0)
     gear_min_contrast: float = param(12.0, "the step from tyre to apron a ground contact needs [grey levels]",
                                      low=0.0, high=255.0)
+    gear_axes: int = param(3, "how many symmetric axes (the best about each peak of the coarse search, most "
+                           "symmetric first) are looked at for the nose wheel: the first whose tyre-to-apron step "
+                           "reaches gear_axis_contrast is taken (an engine's round cowl can be as symmetric as the "
+                           "nose, but has no tyre under it), the most symmetric if none does; 1: the most symmetric "
+                           "axis alone", low=1, high=3)
+    gear_axis_contrast: float = param(30.0, "the tyre-to-apron step that makes a symmetric axis the nose wheel's "
+                                      "when several are looked at (gear_axes) [grey levels]", low=0.0, high=255.0)
     gear_agree_sigma: float = param(0.0, "a measured ground contact whose range lies further than this many sigmas "
                                     "from the apparent size's is not taken for the nose wheel (a step on the apron "
                                     "is); 0: every contact is taken", low=0.0, high=1000.0)
@@ -537,7 +544,8 @@ class DockingGuidance:
         return measure_nose_gear(grey, quad, self.aircraft.nose_in_template, self.aircraft.ground_in_template,
                                  self.vertical_at(quad), min_height_px=cfg.gear_min_height_px, search=cfg.gear_search,
                                  window=cfg.gear_window, band=cfg.gear_band, min_symmetry=cfg.gear_min_symmetry,
-                                 min_contrast=cfg.gear_min_contrast)
+                                 min_contrast=cfg.gear_min_contrast, axes=cfg.gear_axes,
+                                 axis_contrast=cfg.gear_axis_contrast)
 
     def vertical_at(self, quad: np.ndarray) -> np.ndarray | None:
         """The image direction of the apron's vertical (down) at the tracked nose, from the calibrated camera."""

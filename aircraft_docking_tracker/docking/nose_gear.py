@@ -16,7 +16,9 @@ pin it down without the template:
    correlation of ``strip[rows, c-K:c]`` with ``strip[rows, c+1:c+K+1]`` flipped, searched within
    ``search`` template heights of the tracked nose (every other column on every other row first,
    then every column and row about its three best peaks), refined to a sub-pixel by a parabola through the best three
-   scores. ``K`` is ``window`` template heights (about the fuselage's half-width).
+   scores. ``K`` is ``window`` template heights (about the fuselage's half-width). An engine's round cowl can be
+   as symmetric as the nose: with ``axes`` > 1 the best column about each of the first few peaks is a candidate,
+   most symmetric first, and the first with a tyre's step under it (``axis_contrast``, step 2) is the axis.
 2. **The ground contact** on that axis: the nose wheel (a dark tyre) meets the lit apron in a step
    of the column's grey profile (averaged over ``band`` template heights either side of the axis),
    dark above, bright below. It is the row with the largest step within ``window`` template heights
@@ -91,13 +93,16 @@ def mirror_scores(rows: np.ndarray, columns: np.ndarray, half_width: int) -> np.
 def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, ground_in_template: float,
                       down=None, *,
                       min_height_px: float = 80.0, search: float = 0.5, window: float = 0.12, band: float = 0.02,
-                      min_symmetry: float = 0.5, min_contrast: float = 12.0) -> np.ndarray:
+                      min_symmetry: float = 0.5, min_contrast: float = 12.0, axes: int = 1,
+                      axis_contrast: float = 30.0) -> np.ndarray:
     """One :data:`NOSE_GEAR_DTYPE` row: the symmetry axis at the nose's row and the nose wheel's ground
     contact (image pixels) of the aircraft tracked as ``quad`` (TL, TR, BR, BL) in the grey image ``grey``.
     ``ground_in_template`` is the contact's fraction of the template's height; ``down`` the image direction of
     the apron's vertical at the nose (from the calibrated camera; None: the template's own vertical, which
-    a tracker's rotation error tilts); the other arguments are the module docstring's (``guidance.gear_*``).
-    NaN where refused."""
+    a tracker's rotation error tilts); ``axes``: how many symmetric axes (the best column about each of the coarse
+    search's peaks, at least ``min_symmetry``, most symmetric first) are looked at: the first whose step reaches
+    ``axis_contrast`` is taken, the most symmetric if none does (1: the most symmetric axis alone); the other
+    arguments are the module docstring's (``guidance.gear_*``). NaN where refused."""
     row = np.full(1, np.nan, NOSE_GEAR_DTYPE)
     quad = np.asarray(quad, np.float64)
     if grey.ndim != 2 or not np.isfinite(quad).all():
@@ -135,22 +140,43 @@ def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, grou
     near = coarse[peaks[np.argsort(-rough[peaks])[:COARSE_PEAKS]]]
     columns = np.unique(np.clip(near[:, None] + np.arange(-3, 4), half - reach, half + reach))
     scores = mirror_scores(rows, columns, half_window)
-    best = int(np.argmax(scores))
-    axis = columns[best] + _parabola_peak(scores, best)
-    row["symmetry"] = scores[best]
-    row["axis_x"], row["axis_y"] = to_image @ np.array([axis, top, 1.0])
-    if scores[best] < min_symmetry:
+    # the best column about each coarse peak, most symmetric first (the first is the best of all)
+    best = []
+    for centre in near:
+        around = np.flatnonzero(np.abs(columns - centre) <= 3)
+        best.append(int(around[np.argmax(scores[around])]))
+    best = np.unique(best)
+    best = best[np.argsort(-scores[best], kind="stable")]
+    chosen = int(best[0])
+    row["symmetry"] = scores[chosen]
+    row["axis_x"], row["axis_y"] = to_image @ np.array([columns[chosen] + _parabola_peak(scores, chosen), top, 1.0])
+    if scores[chosen] < min_symmetry:
         return row
-    # 2. the ground contact on it: the strongest tyre-to-apron step going down, near where the template puts it
+    # 2. the ground contact on it: the strongest tyre-to-apron step going down, near where the template puts it.
+    #    With ``axes`` > 1, an axis whose step is weak gives way to the next symmetric one with a tyre's step: an
+    #    engine's round cowl can be as symmetric as the nose, but has no tyre on the apron under it
     band = max(1, int(round(band * height)))
-    c = int(round(axis))
-    profile = strip[:, c - band:c + band + 1].mean(axis=1)
     expected = top + (ground_in_template - v) * height
-    lo, hi = max(2, int(expected) - half_window), min(len(profile) - 3, int(expected) + half_window)
+    lo, hi = max(2, int(expected) - half_window), min(strip.shape[0] - 3, int(expected) + half_window)
     if hi <= lo:
         return row
-    contact, row["contrast"] = ground_contact(profile, lo, hi, max(2, int(round(TYRE * height))),
-                                              max(2, int(round(APRON * height))))
+    found = None
+    for i in best[:max(1, axes)]:
+        if scores[i] < min_symmetry:
+            break
+        axis = columns[i] + _parabola_peak(scores, int(i))
+        c = int(round(axis))
+        profile = strip[:, c - band:c + band + 1].mean(axis=1)
+        contact, contrast = ground_contact(profile, lo, hi, max(2, int(round(TYRE * height))),
+                                           max(2, int(round(APRON * height))))
+        if found is None or contrast >= axis_contrast:
+            found = (i, axis, contrast, contact)
+        if contrast >= axis_contrast:
+            break
+    i, axis, row["contrast"], contact = found
+    if i != chosen:
+        row["symmetry"] = scores[i]
+        row["axis_x"], row["axis_y"] = to_image @ np.array([axis, top, 1.0])
     if row["contrast"][0] < min_contrast:
         return row
     row["ground_x"], row["ground_y"] = to_image @ np.array([axis, contact, 1.0])
