@@ -147,10 +147,10 @@ def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, grou
         best.append(int(around[np.argmax(scores[around])]))
     best = np.unique(best)
     best = best[np.argsort(-scores[best], kind="stable")]
-    chosen = int(best[0])
-    row["symmetry"] = scores[chosen]
-    row["axis_x"], row["axis_y"] = to_image @ np.array([columns[chosen] + _parabola_peak(scores, chosen), top, 1.0])
-    if scores[chosen] < min_symmetry:
+    candidates = [(float(scores[i]), columns[i] + _parabola_peak(scores, int(i))) for i in best[:max(1, axes)]]
+    row["symmetry"], axis = candidates[0]
+    row["axis_x"], row["axis_y"] = to_image @ np.array([axis, top, 1.0])
+    if row["symmetry"][0] < min_symmetry:
         return row
     # 2. the ground contact on it: the strongest tyre-to-apron step going down, near where the template puts it.
     #    With ``axes`` > 1, an axis whose step is weak gives way to the next symmetric one with a tyre's step: an
@@ -161,22 +161,19 @@ def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, grou
     if hi <= lo:
         return row
     found = None
-    for i in best[:max(1, axes)]:
-        if scores[i] < min_symmetry:
+    for symmetry, axis in candidates:
+        if symmetry < min_symmetry:
             break
-        axis = columns[i] + _parabola_peak(scores, int(i))
         c = int(round(axis))
         profile = strip[:, c - band:c + band + 1].mean(axis=1)
         contact, contrast = ground_contact(profile, lo, hi, max(2, int(round(TYRE * height))),
                                            max(2, int(round(APRON * height))))
         if found is None or contrast >= axis_contrast:
-            found = (i, axis, contrast, contact)
+            found = (symmetry, axis, contrast, contact)
         if contrast >= axis_contrast:
             break
-    i, axis, row["contrast"], contact = found
-    if i != chosen:
-        row["symmetry"] = scores[i]
-        row["axis_x"], row["axis_y"] = to_image @ np.array([axis, top, 1.0])
+    row["symmetry"], axis, row["contrast"], contact = found
+    row["axis_x"], row["axis_y"] = to_image @ np.array([axis, top, 1.0])
     if row["contrast"][0] < min_contrast:
         return row
     row["ground_x"], row["ground_y"] = to_image @ np.array([axis, contact, 1.0])
