@@ -308,6 +308,19 @@ def test_ground_contact_is_the_tyres_edge_with_a_joint_line_right_under_it():
     assert abs(ground_contact(stop_bar, 2, 14, 5, 2)[0] - 7.5) < 0.2
 
 
+def test_nose_wheel_measured_alike_in_colour_and_in_grey(stop_frames):
+    """Only the strip's pixels of a colour frame are turned grey: the measurement is the whole grey frame's."""
+    import cv2
+
+    for k, (_, stand, frame) in enumerate(stop_frames):
+        guidance = DockingGuidance(stand)
+        quad = _perturbed(frame.quad, (-1) ** k * 0.2, 5.0, 1.03)
+        colour = guidance.measure_gear(frame.image, quad)
+        grey = guidance.measure_gear(cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY), quad)
+        assert np.isfinite(colour["ground_y"]).all()
+        assert np.allclose(colour.tolist(), grey.tolist(), rtol=0.0, atol=1e-9)
+
+
 def test_nose_wheel_not_measured_where_it_cannot_be(stop_frames):
     scene, stand, frame = stop_frames[-1]
     guidance = DockingGuidance(stand)

@@ -78,11 +78,10 @@ import logging
 from collections import deque
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 
 from ..config import ConfigError, param
-from .nose_gear import NOSE_GEAR_DTYPE, measure_nose_gear
+from .nose_gear import NOSE_GEAR_DTYPE, measure_nose_gear, template_height
 from .stand import AircraftType, StandCalibration, load_stand
 
 NO_AIRCRAFT, TRACKING, SLOW_DOWN, STOP, OVERSHOOT, LOST = range(6)
@@ -362,29 +361,29 @@ def contact_depths(stand: StandCalibration, aircraft: AircraftType, depth_size: 
             [depth_size * size_sigma, abs(depth_ground - depth_below) * gear_pixel_sigma])
 
 
-def contact_disagreement(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, gear: np.ndarray,
+def contact_disagreement(stand: StandCalibration, aircraft: AircraftType, depth_size: float, gear: np.ndarray,
                          size_sigma: float, gear_pixel_sigma: float) -> float:
-    """How many sigmas apart the two independent depths of :func:`contact_depths` are (NaN if either is missing:
-    :meth:`DockingGuidance.measure` then refuses the contact).
+    """How many sigmas apart the two independent depths of :func:`contact_depths` are, the quadrilateral's
+    :func:`size_depth` being ``depth_size`` (NaN if either is missing: :meth:`DockingGuidance.measure` then refuses
+    the contact).
     A contact on the nose wheel agrees with the size to a few of the size's 10 %; a tyre-to-apron step found on
     the apron below a quadrilateral that has slipped lies tens of metres off."""
     contact = np.array([float(gear["ground_x"][0]), float(gear["ground_y"][0])])
-    (a, b), (sa, sb) = contact_depths(stand, aircraft, size_depth(stand, aircraft, quad), contact, size_sigma,
-                                      gear_pixel_sigma)
+    (a, b), (sa, sb) = contact_depths(stand, aircraft, depth_size, contact, size_sigma, gear_pixel_sigma)
     return abs(a - b) / float(np.hypot(sa, sb))
 
 
 def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarray, pixel_sigma: float,
                 size_sigma: float, gear: np.ndarray | None = None,
-                gear_pixel_sigma: float = GuidanceConfig.gear_pixel_sigma
+                gear_pixel_sigma: float = GuidanceConfig.gear_pixel_sigma, depth_size: float | None = None
                 ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
     """(nose pixel, fused nose point on the stand [m], depth from the ground plane, depth from the size,
     fused depth's sigma [m]) of one tracked quadrilateral (steps 1-2 of the module docstring); with a measured
     nose-wheel ground contact (``gear``, a :data:`~aircraft_docking_tracker.docking.nose_gear.NOSE_GEAR_DTYPE`
     row) the ground-plane depth is the contact's on the apron, and the nose is ``nose_gear_setback_m`` ahead
-    of it along the lead-in line (step 2b)."""
+    of it along the lead-in line (step 2b). ``depth_size``: the quadrilateral's :func:`size_depth` if known."""
     camera = stand.camera
-    depth_size = size_depth(stand, aircraft, quad)
+    depth_size = size_depth(stand, aircraft, quad) if depth_size is None else depth_size
     if gear is not None and np.isfinite(gear["ground_y"]).all():
         contact = np.array([float(gear["ground_x"][0]), float(gear["ground_y"][0])])
         depths, sigmas = contact_depths(stand, aircraft, depth_size, contact, size_sigma, gear_pixel_sigma)
@@ -394,7 +393,7 @@ def locate_nose(stand: StandCalibration, aircraft: AircraftType, quad: np.ndarra
             return contact, np.full(3, np.nan), float(depth_ground), float(depth_size), sigma
         foot = camera.point_at_depth(contact, depth)[0][:2]
         i, _, _ = _nearest_segment(stand.lead_in, foot)
-        point = np.r_[foot + aircraft.nose_gear_setback_m * _direction(stand.lead_in, i), aircraft.nose_height_m]
+        point = np.append(foot + aircraft.nose_gear_setback_m * _direction(stand.lead_in, i), aircraft.nose_height_m)
         nose = np.array([float(gear["axis_x"][0]), float(gear["axis_y"][0])])
         return nose, point, float(depth_ground), float(depth_size), sigma
     nose = template_point(quad, aircraft.nose_in_template)
@@ -501,6 +500,7 @@ class DockingGuidance:
         self.last_taken_ns: int | None = None
         self.last_taken_gear = False      # the last measurement taken was of the nose wheel
         self.farthest_m = float("nan")    # the farthest smoothed distance since the smoothing (re)started
+        self._depth_of = None             # (the last quadrilateral, its size_depth)
         self.slow_since_ns: int | None = None   # when slow down (or nearer) was first shown, continuously
         self.recent: deque = deque()      # (stamp, smoothed distance) of the measured frames of the last halted_s
 
@@ -538,10 +538,9 @@ class DockingGuidance:
         """The nose wheel's ground contact in ``image`` (grey or BGR) under the tracked ``quad``: one
         :data:`~aircraft_docking_tracker.docking.nose_gear.NOSE_GEAR_DTYPE` row (NaN where not measured)."""
         cfg = self.config
-        if quad is None or cfg.gear_min_height_px <= 0:
+        if quad is None or cfg.gear_min_height_px <= 0 or template_height(quad) < cfg.gear_min_height_px:
             return np.full(1, np.nan, NOSE_GEAR_DTYPE)
-        grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
-        return measure_nose_gear(grey, quad, self.aircraft.nose_in_template, self.aircraft.ground_in_template,
+        return measure_nose_gear(image, quad, self.aircraft.nose_in_template, self.aircraft.ground_in_template,
                                  self.vertical_at(quad), min_height_px=cfg.gear_min_height_px, search=cfg.gear_search,
                                  window=cfg.gear_window, band=cfg.gear_band, min_symmetry=cfg.gear_min_symmetry,
                                  min_contrast=cfg.gear_min_contrast, axes=cfg.gear_axes,
@@ -550,23 +549,31 @@ class DockingGuidance:
     def vertical_at(self, quad: np.ndarray) -> np.ndarray | None:
         """The image direction of the apron's vertical (down) at the tracked nose, from the calibrated camera."""
         camera = self.stand.camera
-        depth = size_depth(self.stand, self.aircraft, quad)
+        depth = self.size_depth(quad)
         if not np.isfinite(depth):
             return None
         nose = camera.point_at_depth(template_point(quad, self.aircraft.nose_in_template), depth)[0]
         down = vertical_per_metre(self.stand, nose)
         return down if np.isfinite(down).all() and np.linalg.norm(down) > 0 else None
 
+    def size_depth(self, quad: np.ndarray) -> float:
+        """:func:`size_depth` of ``quad``, computed once a tracked quadrilateral (:meth:`measure_gear` and
+        :meth:`measure` both need it)."""
+        if self._depth_of is None or not np.array_equal(self._depth_of[0], quad):
+            self._depth_of = (np.array(quad, np.float64), size_depth(self.stand, self.aircraft, quad))
+        return self._depth_of[1]
+
     def measure(self, quad: np.ndarray, gear: np.ndarray | None = None) -> tuple[GuidanceResult, float, float]:
         """One frame's unsmoothed guidance figures, the fused depth's sigma and the lateral offset's [m]."""
         cfg = self.config
+        depth_size = self.size_depth(quad)
         measured = gear is not None and bool(np.isfinite(gear["ground_y"]).all())
         refused = measured and cfg.gear_agree_sigma > 0 and not contact_disagreement(
-            self.stand, self.aircraft, quad, gear, cfg.size_sigma, cfg.gear_pixel_sigma) <= cfg.gear_agree_sigma
+            self.stand, self.aircraft, depth_size, gear, cfg.size_sigma, cfg.gear_pixel_sigma) <= cfg.gear_agree_sigma
         measured = measured and not refused
         nose, point, depth_ground, depth_size, sigma = locate_nose(self.stand, self.aircraft, quad, cfg.pixel_sigma,
                                                                    cfg.size_sigma, gear if measured else None,
-                                                                   cfg.gear_pixel_sigma)
+                                                                   cfg.gear_pixel_sigma, depth_size)
         result = GuidanceResult(TRACKING, nose_px=nose, nose_stand=point, depth_ground_m=depth_ground,
                                 depth_size_m=depth_size, gear_measured=measured, gear_refused=refused)
         lateral_sigma = float("nan")

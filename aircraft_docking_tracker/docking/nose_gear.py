@@ -90,13 +90,20 @@ def mirror_scores(rows: np.ndarray, columns: np.ndarray, half_width: int) -> np.
     return np.where(norm > 0, cross / np.where(norm > 0, norm, 1.0), -1.0)
 
 
-def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, ground_in_template: float,
+def template_height(quad: np.ndarray) -> float:
+    """The tracked template's height in the image [px]: the length of its two vertical sides' mean."""
+    quad = np.asarray(quad, np.float64)
+    return float(np.linalg.norm(0.5 * ((quad[3] - quad[0]) + (quad[2] - quad[1]))))
+
+
+def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, ground_in_template: float,
                       down=None, *,
                       min_height_px: float = 80.0, search: float = 0.5, window: float = 0.12, band: float = 0.02,
                       min_symmetry: float = 0.5, min_contrast: float = 12.0, axes: int = 1,
                       axis_contrast: float = 30.0) -> np.ndarray:
     """One :data:`NOSE_GEAR_DTYPE` row: the symmetry axis at the nose's row and the nose wheel's ground
-    contact (image pixels) of the aircraft tracked as ``quad`` (TL, TR, BR, BL) in the grey image ``grey``.
+    contact (image pixels) of the aircraft tracked as ``quad`` (TL, TR, BR, BL) in ``image`` (grey, or BGR: only the
+    strip's pixels are turned grey).
     ``ground_in_template`` is the contact's fraction of the template's height; ``down`` the image direction of
     the apron's vertical at the nose (from the calibrated camera; None: the template's own vertical, which
     a tracker's rotation error tilts); ``axes``: how many symmetric axes (the best column about each of the coarse
@@ -105,10 +112,11 @@ def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, grou
     arguments are the module docstring's (``guidance.gear_*``). NaN where refused."""
     row = np.full(1, np.nan, NOSE_GEAR_DTYPE)
     quad = np.asarray(quad, np.float64)
-    if grey.ndim != 2 or not np.isfinite(quad).all():
+    colour = image.ndim == 3 and image.shape[2] == 3
+    if not (image.ndim == 2 or colour) or not np.isfinite(quad).all():
         return row
     sides = 0.5 * ((quad[3] - quad[0]) + (quad[2] - quad[1]))
-    height = float(np.linalg.norm(sides))
+    height = template_height(quad)
     if min_height_px <= 0 or height < min_height_px:
         return row
     down = np.asarray(down if down is not None else sides, np.float64)
@@ -125,17 +133,23 @@ def measure_nose_gear(grey: np.ndarray, quad: np.ndarray, nose_in_template, grou
     to_image = np.array([[right[0], down[0], nose[0] - half * right[0] - top * down[0]],
                          [right[1], down[1], nose[1] - half * right[1] - top * down[1]]])
     corners = np.array([[0, 0, 1], [2 * half, 0, 1], [0, top + bottom, 1], [2 * half, top + bottom, 1]]) @ to_image.T
-    h_img, w_img = grey.shape
+    h_img, w_img = image.shape[:2]
     if (corners < 0).any() or (corners[:, 0] > w_img - 1).any() or (corners[:, 1] > h_img - 1).any():
         return row
-    strip = cv2.warpAffine(grey, to_image, (2 * half + 1, top + bottom + 1),
+    # only the pixels under the strip (and the next ones the bilinear samples reach) are turned grey and warped:
+    # the same strip to the bit as from the whole grey frame, a fraction of a 640x480 frame's conversion
+    (x0, y0), (x1, y1) = np.floor(corners.min(axis=0)).astype(int), np.ceil(corners.max(axis=0)).astype(int) + 2
+    patch = image[y0:y1, x0:x1]
+    grey = cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY) if colour else np.ascontiguousarray(patch)
+    patch_to_image = to_image - np.array([[0.0, 0.0, x0], [0.0, 0.0, y0]])
+    strip = cv2.warpAffine(grey, patch_to_image, (2 * half + 1, top + bottom + 1),
                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP).astype(np.float32)
     # 1. the symmetry axis over the nose's rows: every other column on every other row, then every column and row
     #    about the best few peaks (the fuselage's and an engine's can swap places on the coarse grid)
     rows = strip[top - half_window:top + half_window + 1]
     coarse = np.arange(half - reach, half + reach + 1, 2)
     rough = mirror_scores(rows[::2], coarse, half_window)
-    padded = np.r_[-np.inf, rough, -np.inf]
+    padded = np.concatenate([[-np.inf], rough, [-np.inf]])
     peaks = np.flatnonzero((rough >= padded[:-2]) & (rough >= padded[2:]))
     near = coarse[peaks[np.argsort(-rough[peaks])[:COARSE_PEAKS]]]
     columns = np.unique(np.clip(near[:, None] + np.arange(-3, 4), half - reach, half + reach))

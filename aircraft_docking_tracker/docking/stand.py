@@ -72,7 +72,7 @@ class StandCamera:
     def rays(self, pixels) -> np.ndarray:
         """Directions in the stand frame (N, 3) of image points, scaled to unit depth along the optical axis."""
         pixels = np.atleast_2d(np.asarray(pixels, np.float64))
-        cam = np.c_[pixels, np.ones(len(pixels))] @ self.K_inv.T
+        cam = np.concatenate([pixels, np.ones((len(pixels), 1))], axis=1) @ self.K_inv.T
         return cam @ self.R
 
     def depth_on_plane(self, pixels, height_m: float) -> np.ndarray:
