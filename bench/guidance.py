@@ -119,7 +119,7 @@ def track_approach(job: tuple) -> dict:
 
 
 GEAR_KEYS = ("gear_min_height_px", "gear_search", "gear_window", "gear_band", "gear_min_symmetry", "gear_min_contrast",
-             "gear_axes", "gear_axis_contrast")
+             "gear_axes", "gear_axis_contrast", "gear_contact_window", "gear_lowest_step")
 
 
 def measure_gears(job: tuple) -> str:

@@ -291,6 +291,32 @@ def test_an_engine_as_symmetric_as_the_nose_gives_way_to_the_axis_with_the_tyre(
     assert engine >= 5                                 # measured: 7 of 7 frames on the engine
 
 
+def test_a_quadrilateral_a_fifth_too_small_still_finds_the_tyre_not_the_step_above_it():
+    """Tuning approach 114's stand (low sun, the camera 8.8 m high and 48.6 m out), its quadrilateral 0.78 of its size
+    and a third of its height to the side, as the tracker had it all the way in (0.78-0.81): the template then puts the tyre's
+    row a window too high, and the old search (0.12 template heights, the largest step) took a strong step 30-40 px
+    above the tyre on every frame (the guidance read 53-55 m there). The contact's search is wider
+    (``gear_contact_window``) and takes the lowest step near the largest (``gear_lowest_step``): the tyre's, within
+    a pixel; on the true quadrilateral nothing moves."""
+    scene = DockingScene(DockingSceneConfig(frames=60, weather="low_sun", occluder="none", growth=5.18, turn_deg=22.2,
+                                            difficulty=2, camera_height_m=8.8, camera_distance_m=48.6,
+                                            lateral_offset_m=1.0), seed=114)
+    stand = parse_stand(scene.stand_calibration())
+    before = DockingGuidance(stand, GuidanceConfig(gear_contact_window=0.12, gear_lowest_step=0.0))
+    now = DockingGuidance(stand)
+    above, found = 0, 0
+    for frame in scene.frames():
+        if frame.index < 36 or frame.index % 2:
+            continue
+        contact = scene.camera.project([[*frame.nose_ground, 0.0]])[0]
+        quad = _perturbed(frame.quad, -0.33, 0.0, 0.78)
+        old, new = before.measure_gear(frame.image, quad), now.measure_gear(frame.image, quad)
+        above += old["ground_y"][0] < contact[1] - 15.0
+        found += abs(new["ground_y"][0] - contact[1]) < 1.5
+        assert abs(now.measure_gear(frame.image, frame.quad)["ground_y"][0] - contact[1]) < 1.5
+    assert above >= 10 and found >= 9                  # of 12 frames (measured: 12 and 11)
+
+
 def test_ground_contact_is_the_tyres_edge_with_a_joint_line_right_under_it():
     """A grey profile down the axis as measured on a bench stand (415, 12.3 m to go): the tyre (44) ends after
     row 7, a slab joint (114, 118) runs right under it, then the apron (140-150). The step's bands smear the edge
@@ -306,6 +332,12 @@ def test_ground_contact_is_the_tyres_edge_with_a_joint_line_right_under_it():
     stop_bar = clean.copy()
     stop_bar[8:11] = 230.0                             # a painted stop bar under the tyre: the edge stays the tyre's
     assert abs(ground_contact(stop_bar, 2, 14, 5, 2)[0] - 7.5) < 0.2
+    # a stronger step above the tyre (a dark band with lit skin under it): the largest step takes it, the lowest
+    # peak of at least 0.75 of it is the tyre's
+    above_it = np.array([150, 40, 40, 40, 40, 40, 150, 150, 150, 150, 150, 50, 50, 50, 50, 50, 140, 140, 140, 140, 140,
+                         140], float)
+    assert abs(ground_contact(above_it, 3, 18, 4, 2)[0] - 5.5) < 0.3
+    assert abs(ground_contact(above_it, 3, 18, 4, 2, lowest=0.75)[0] - 15.5) < 0.3
 
 
 def test_nose_wheel_measured_alike_in_colour_and_in_grey(stop_frames):

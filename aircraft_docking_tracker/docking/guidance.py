@@ -186,8 +186,18 @@ class GuidanceConfig:
                                       high=10000.0)
     gear_search: float = param(0.5, "the aircraft's symmetry axis is searched this far either side of the "
                                "tracked nose [template heights]", low=0.01, high=1.0)
-    gear_window: float = param(0.12, "the symmetry window's half-width, and the ground contact's search either "
-                               "side of where the template puts it [template heights]", low=0.01, high=0.5)
+    gear_window: float = param(0.12, "the symmetry window's half-width, and the tyre's search either side of where "
+                               "the template puts it when a symmetric axis is chosen (gear_axes) [template heights]",
+                               low=0.01, high=0.5)
+    gear_contact_window: float = param(0.15, "the ground contact's search either side of where the tracked "
+                                       "template puts it [template heights] (a template a quarter too small or "
+                                       "too large puts the tyre a window or more off; 0.12, the symmetry's "
+                                       "window, until session 36; on the tuning set 0.21 takes steps far below "
+                                       "the tyre)", low=0.01, high=0.5)
+    gear_lowest_step: float = param(0.75, "the ground contact is the lowest peak of the tyre-to-apron step in its "
+                                    "search that reaches this fraction of the largest there: under the tyre there "
+                                    "is only apron, and a strong step above it (tuning 114: 30 px up, the largest "
+                                    "on most frames) is not the contact; 0: the largest step", low=0.0, high=1.0)
     gear_band: float = param(0.02, "the ground contact's grey profile is averaged this far either side of the "
                              "axis [template heights]", low=0.0, high=0.2)
     gear_min_symmetry: float = param(0.5, "the mirror correlation a symmetry axis needs", low=-1.0, high=1.0)
@@ -544,7 +554,8 @@ class DockingGuidance:
                                  self.vertical_at(quad), min_height_px=cfg.gear_min_height_px, search=cfg.gear_search,
                                  window=cfg.gear_window, band=cfg.gear_band, min_symmetry=cfg.gear_min_symmetry,
                                  min_contrast=cfg.gear_min_contrast, axes=cfg.gear_axes,
-                                 axis_contrast=cfg.gear_axis_contrast)
+                                 axis_contrast=cfg.gear_axis_contrast, contact_window=cfg.gear_contact_window,
+                                 lowest_step=cfg.gear_lowest_step)
 
     def vertical_at(self, quad: np.ndarray) -> np.ndarray | None:
         """The image direction of the apron's vertical (down) at the tracked nose, from the calibrated camera."""

@@ -21,8 +21,10 @@ pin it down without the template:
    most symmetric first, and the first with a tyre's step under it (``axis_contrast``, step 2) is the axis.
 2. **The ground contact** on that axis: the nose wheel (a dark tyre) meets the lit apron in a step
    of the column's grey profile (averaged over ``band`` template heights either side of the axis),
-   dark above, bright below. It is the row with the largest step within ``window`` template heights
-   of where the template puts it (the nose's row plus the type's nose height), the step being the
+   dark above, bright below. It is the lowest row whose step is a peak of at least ``lowest_step`` of the largest
+   step within ``contact_window`` template heights of where the template puts it (the nose's row plus the type's nose
+   height: a template a fifth too small puts it a window too high, where a strong step above the tyre is the
+   largest; under the tyre there is only apron; ``lowest_step`` 0: the largest step), the step being the
    darker of two apron bands below the row less the tyre's rows above it (:func:`tyre_steps`: a
    painted stop bar under the axis has apron above it and is bright in its first band only, and was
    taken for the contact when the step was the profile's derivative alone); the edge is then placed
@@ -100,7 +102,8 @@ def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, gro
                       down=None, *,
                       min_height_px: float = 80.0, search: float = 0.5, window: float = 0.12, band: float = 0.02,
                       min_symmetry: float = 0.5, min_contrast: float = 12.0, axes: int = 1,
-                      axis_contrast: float = 30.0) -> np.ndarray:
+                      axis_contrast: float = 30.0, contact_window: float | None = None,
+                      lowest_step: float = 0.0) -> np.ndarray:
     """One :data:`NOSE_GEAR_DTYPE` row: the symmetry axis at the nose's row and the nose wheel's ground
     contact (image pixels) of the aircraft tracked as ``quad`` (TL, TR, BR, BL) in ``image`` (grey, or BGR: only the
     strip's pixels are turned grey).
@@ -108,7 +111,9 @@ def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, gro
     the apron's vertical at the nose (from the calibrated camera; None: the template's own vertical, which
     a tracker's rotation error tilts); ``axes``: how many symmetric axes (the best column about each of the coarse
     search's peaks, at least ``min_symmetry``, most symmetric first) are looked at: the first whose step reaches
-    ``axis_contrast`` is taken, the most symmetric if none does (1: the most symmetric axis alone); the other
+    ``axis_contrast`` is taken, the most symmetric if none does (1: the most symmetric axis alone);
+    ``contact_window``: the ground contact's search either side of where the template puts it [template heights]
+    (None: ``window``, the symmetry's half-width); the other
     arguments are the module docstring's (``guidance.gear_*``). NaN where refused."""
     row = np.full(1, np.nan, NOSE_GEAR_DTYPE)
     quad = np.asarray(quad, np.float64)
@@ -128,7 +133,8 @@ def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, gro
     reach = max(1, int(round(search * height)))
     half = reach + half_window + 1
     top = half_window + 1                                   # strip rows above the nose's row
-    bottom = int(np.ceil((ground_in_template - v) * height)) + half_window + int(np.ceil(2 * APRON * height)) + 6
+    half_contact = half_window if contact_window is None else max(2, int(round(contact_window * height)))
+    bottom = int(np.ceil((ground_in_template - v) * height)) + half_contact + int(np.ceil(2 * APRON * height)) + 6
     # strip (a, b) -> image: nose + (a - half) right + (b - top) down
     to_image = np.array([[right[0], down[0], nose[0] - half * right[0] - top * down[0]],
                          [right[1], down[1], nose[1] - half * right[1] - top * down[1]]])
@@ -168,25 +174,32 @@ def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, gro
         return row
     # 2. the ground contact on it: the strongest tyre-to-apron step going down, near where the template puts it.
     #    With ``axes`` > 1, an axis whose step is weak gives way to the next symmetric one with a tyre's step: an
-    #    engine's round cowl can be as symmetric as the nose, but has no tyre on the apron under it
+    #    engine's round cowl can be as symmetric as the nose, but has no tyre on the apron under it. The axis is
+    #    chosen on the symmetry's window (a wider one finds an engine's own step); the contact is then searched on it
+    #    within ``contact_window``, the lowest step near the largest (``lowest_step``)
     band = max(1, int(round(band * height)))
     expected = top + (ground_in_template - v) * height
     lo, hi = max(2, int(expected) - half_window), min(strip.shape[0] - 3, int(expected) + half_window)
     if hi <= lo:
         return row
+    tyre_rows, apron_rows = max(2, int(round(TYRE * height))), max(2, int(round(APRON * height)))
     found = None
     for symmetry, axis in candidates:
         if symmetry < min_symmetry:
             break
         c = int(round(axis))
         profile = strip[:, c - band:c + band + 1].mean(axis=1)
-        contact, contrast = ground_contact(profile, lo, hi, max(2, int(round(TYRE * height))),
-                                           max(2, int(round(APRON * height))))
+        contact, contrast = ground_contact(profile, lo, hi, tyre_rows, apron_rows)
         if found is None or contrast >= axis_contrast:
-            found = (symmetry, axis, contrast, contact)
+            found = (symmetry, axis, contrast, contact, profile)
         if contrast >= axis_contrast:
             break
-    row["symmetry"], axis, row["contrast"], contact = found
+    symmetry, axis, contrast, contact, profile = found
+    if half_contact != half_window or lowest_step > 0:
+        contact, contrast = ground_contact(profile, max(2, int(expected) - half_contact),
+                                           min(strip.shape[0] - 3, int(expected) + half_contact), tyre_rows,
+                                           apron_rows, lowest_step)
+    row["symmetry"], row["contrast"] = symmetry, contrast
     row["axis_x"], row["axis_y"] = to_image @ np.array([axis, top, 1.0])
     if row["contrast"][0] < min_contrast:
         return row
@@ -194,7 +207,8 @@ def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, gro
     return row
 
 
-def ground_contact(profile: np.ndarray, lo: int, hi: int, above: int, below: int) -> tuple[float, float]:
+def ground_contact(profile: np.ndarray, lo: int, hi: int, above: int, below: int,
+                   lowest: float = 0.0) -> tuple[float, float]:
     """(the tyre's ground contact in a grey ``profile`` going down the axis, to a sub-pixel; its step): the row in
     ``lo``..``hi`` with the largest :func:`tyre_steps` step, then the edge at the peak of the profile's central
     difference from ``below`` rows above that row to the row after it, by a parabola. The step's bands smear the
@@ -202,9 +216,15 @@ def ground_contact(profile: np.ndarray, lo: int, hi: int, above: int, below: int
     darkens the apron band of the tyre's own edge and lends its dark row to the tyre band of the rows under it,
     and the step's best row then lay below the joint (1-2 px, a metre or two at 40-60 m); the tyre's edge is the
     larger jump. On the guidance bench's six cached sets (360 runs, each stand's exact calibration) the frames
-    more than 0.5 m off in the last 15 m went from 2.4 % to 1.6 % with it."""
+    more than 0.5 m off in the last 15 m went from 2.4 % to 1.6 % with it. With ``lowest`` > 0 the row is instead the
+    lowest peak of the step that reaches ``lowest`` of the largest in ``lo``..``hi``."""
     step = tyre_steps(profile, above, below)
     j = lo + int(np.argmax(step[lo:hi + 1]))
+    if lowest > 0:      # the lowest peak of at least ``lowest`` of the largest step: under the tyre is only apron
+        inside = step[lo:hi + 1]
+        padded = np.concatenate([[-np.inf], inside, [-np.inf]])
+        peaks = np.flatnonzero((inside >= padded[:-2]) & (inside >= padded[2:]) & (inside >= lowest * step[j]))
+        j = lo + int(peaks[-1]) if len(peaks) else j
     rise = np.zeros_like(profile)
     rise[1:-1] = 0.5 * (profile[2:] - profile[:-2])
     first = max(1, j - below)
