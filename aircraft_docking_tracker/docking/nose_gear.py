@@ -220,7 +220,7 @@ def ground_contact(profile: np.ndarray, lo: int, hi: int, above: int, below: int
     lowest peak of the step that reaches ``lowest`` of the largest in ``lo``..``hi``."""
     step = tyre_steps(profile, above, below)
     j = lo + int(np.argmax(step[lo:hi + 1]))
-    if lowest > 0:      # the lowest peak of at least ``lowest`` of the largest step: under the tyre is only apron
+    if lowest > 0 and step[j] > 0:   # the lowest peak of at least ``lowest`` of the largest: under the tyre, apron
         inside = step[lo:hi + 1]
         padded = np.concatenate([[-np.inf], inside, [-np.inf]])
         peaks = np.flatnonzero((inside >= padded[:-2]) & (inside >= padded[2:]) & (inside >= lowest * step[j]))
