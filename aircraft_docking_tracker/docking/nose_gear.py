@@ -92,10 +92,15 @@ def mirror_scores(rows: np.ndarray, columns: np.ndarray, half_width: int) -> np.
     return np.where(norm > 0, cross / np.where(norm > 0, norm, 1.0), -1.0)
 
 
-def template_height(quad: np.ndarray) -> float:
-    """The tracked template's height in the image [px]: the length of its two vertical sides' mean."""
+def template_vertical(quad: np.ndarray) -> np.ndarray:
+    """The mean of the tracked template's two vertical sides (TL->BL, TR->BR) in the image [px]."""
     quad = np.asarray(quad, np.float64)
-    return float(np.linalg.norm(0.5 * ((quad[3] - quad[0]) + (quad[2] - quad[1]))))
+    return 0.5 * ((quad[3] - quad[0]) + (quad[2] - quad[1]))
+
+
+def template_height(quad: np.ndarray) -> float:
+    """The tracked template's height in the image [px]: the length of :func:`template_vertical`."""
+    return float(np.linalg.norm(template_vertical(quad)))
 
 
 def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, ground_in_template: float,
@@ -120,8 +125,8 @@ def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, gro
     colour = image.ndim == 3 and image.shape[2] == 3
     if not (image.ndim == 2 or colour) or not np.isfinite(quad).all():
         return row
-    sides = 0.5 * ((quad[3] - quad[0]) + (quad[2] - quad[1]))
-    height = template_height(quad)
+    sides = template_vertical(quad)
+    height = float(np.linalg.norm(sides))
     if min_height_px <= 0 or height < min_height_px:
         return row
     down = np.asarray(down if down is not None else sides, np.float64)
