@@ -39,6 +39,7 @@ import numba
 import numpy as np
 
 from aircraft_docking_tracker.config import param
+from multi_target_tracker.area_resize import resize_area
 
 LBP_SIZE = 32          # texture window side (seed §2.1)
 BLOCK = 16             # texture block side
@@ -205,7 +206,8 @@ class LevelScan:
     """Raw features and eq. 3-4 maxima of every window of one pyramid level, on a stride grid.
 
     ``gray_l`` is the frame resized so that one window is 32x32 (the texture level); the contour
-    level is the same frame resized to exactly twice that size. Windows have their top-left
+    level is the same frame resized to exactly twice that size (both OpenCV's ``INTER_AREA``, computed
+    to the same bits by :func:`area_resize.resize_area`). Windows have their top-left
     *code* position at ``(row * stride, col * stride)`` (pixel ``+1`` in ``gray_l``), ``stride``
     dividing 16 so that every block lies on the histogram cell grid.
     """
@@ -226,10 +228,9 @@ class LevelScan:
         if self.rows == 0 or self.cols == 0:
             return
         if feature_set in ("lbp", "fused"):
-            self._texture(cv2.resize(frame_gray, (wl, hl), interpolation=cv2.INTER_AREA))
+            self._texture(resize_area(frame_gray, (wl, hl)))
         if feature_set in ("contour", "fused"):
-            self._contour(cv2.resize(frame_gray, (2 * wl, 2 * hl), interpolation=cv2.INTER_AREA),
-                          edge_threshold)
+            self._contour(resize_area(frame_gray, (2 * wl, 2 * hl)), edge_threshold)
 
     @property
     def n_windows(self) -> int:
