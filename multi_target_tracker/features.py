@@ -243,20 +243,11 @@ class LevelScan:
 
     # --- texture: cell histograms -> block histograms -> per-window maximum (eq. 3)
     def _texture(self, gray_l: np.ndarray) -> None:
-        s = self.stride
-        codes = lbp_codes(gray_l)
-        hc, wc = codes.shape[0] // s, codes.shape[1] // s
-        blocks = _cell_histograms(codes, s, hc, wc)
-        span = 1  # sum 16/stride cells per side by doubling (stride divides 16: a power of two)
-        while span < BLOCK // s:
-            blocks = blocks[:, :-span] + blocks[:, span:]
-            blocks = blocks[:, :, :-span] + blocks[:, :, span:]
-            span *= 2
-        self.blocks = blocks  # blocks[code, by, bx]: histogram of the 16x16 block at cell (by, bx)
-        block_max = self.blocks.max(axis=0)
-        r, c = self.rows, self.cols
-        self.m_lbp = np.max([block_max[dy // s:dy // s + r, dx // s:dx // s + c] for dy, dx in BLOCK_OFFSETS],
-                            axis=0).reshape(-1).astype(np.int64)
+        blocks, self.m_lbp = _block_histograms(lbp_codes(gray_l), self.stride, self.rows, self.cols)
+        by, bx = blocks.shape[0], blocks.shape[1] // N_CODES
+        # blocks[code, by, bx]: histogram of the 16x16 block at cell (by, bx), one plane per code (the cascade's
+        # stumps each read one code across all windows)
+        self.blocks = cv2.transpose(blocks.reshape(by * bx, N_CODES)).reshape(N_CODES, by, bx)
 
     # --- contour: potential maps from prefix sums, per-window maximum by sliding max (eq. 4)
     def _contour(self, gray_c: np.ndarray, edge_threshold: float) -> None:
@@ -381,13 +372,47 @@ def _column_potentials(b, step, rows, n, from_bottom):
 
 
 @numba.njit(cache=True, nogil=True)
-def _cell_histograms(codes, cell, hc, wc):
-    """``hist[code, cy, cx]``: how often each LBP code occurs in each ``cell x cell`` cell (int16)."""
-    hist = np.zeros((N_CODES, hc, wc), np.int16)
+def _block_histograms(codes, cell, rows, cols):
+    """The 16x16 blocks' code histograms and each window's largest bin (eq. 3's maximum), in one pass each:
+    ``(blocks, m_lbp)`` with ``blocks[by, bx * 256 + code]`` (int16) the histogram of the block whose top-left
+    ``cell x cell`` cell is (by, bx), and ``m_lbp[row * cols + col]`` (int64) the largest bin of the four
+    blocks of the window at cell (row, col).
+
+    Cell histograms first, each cell's 256 bins side by side (a row of cells stays in cache while its
+    pixels are counted); a block is the sum of its ``16 / cell`` x ``16 / cell`` cells, added a whole row
+    of blocks at a time (contiguous runs); its maximum is taken over its 256 adjacent bins."""
+    hc, wc = codes.shape[0] // cell, codes.shape[1] // cell
+    cells = np.zeros((hc, wc * N_CODES), np.int16)
     for y in range(hc * cell):
+        line = cells[y // cell]
         for x in range(wc * cell):
-            hist[codes[y, x], y // cell, x // cell] += 1
-    return hist
+            line[(x // cell) * N_CODES + codes[y, x]] += 1
+    per = BLOCK // cell
+    hb, wb = hc - per + 1, wc - per + 1
+    blocks = np.zeros((hb, wb * N_CODES), np.int16)
+    length = wb * N_CODES
+    for by in range(hb):
+        out = blocks[by]
+        for i in range(per):
+            source = cells[by + i]
+            for j in range(per):
+                shift = j * N_CODES
+                for k in range(length):
+                    out[k] += source[shift + k]
+    block_max = np.empty((hb, wb), np.int16)
+    for by in range(hb):
+        out = blocks[by]
+        for bx in range(wb):
+            top = out[bx * N_CODES]
+            for k in range(bx * N_CODES + 1, (bx + 1) * N_CODES):
+                top = out[k] if out[k] > top else top
+            block_max[by, bx] = top
+    m_lbp = np.empty(rows * cols, np.int64)
+    for r in range(rows):                      # the window's blocks: BLOCK_OFFSETS, ``per`` cells apart
+        for c in range(cols):
+            m_lbp[r * cols + c] = max(max(block_max[r, c], block_max[r, c + per]),
+                                      max(block_max[r + per, c], block_max[r + per, c + per]))
+    return blocks, m_lbp
 
 
 @numba.njit(cache=True, nogil=True)
