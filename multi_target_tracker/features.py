@@ -25,7 +25,7 @@ grey value is >= c's (bit 0 = top-left, 1 = top, 2 = top-right, 3 = right, 4 = b
 Every window of a frame is scored at once by :class:`LevelScan`: per pyramid level one LBP code
 image, per-cell code histograms and block sums, one binary contour image and its column/row
 prefix sums; the per-window maxima of eqs. 3-4 are exact (maximum over the 256 bins of each
-block; sliding maxima of the potential maps by ``cv2.dilate``). All raw values are integers, so
+block; the largest of each window's step-long runs of the potential maps). All raw values are integers, so
 the normalised comparison ``255 v_k / max >= t`` is tested exactly as ``255 v_k >= t max``.
 The per-pixel and per-window loops (cell histograms, contour potentials, the cascade with its
 early exit) are compiled by numba; :func:`window_features` is the plain reference they are
@@ -249,7 +249,7 @@ class LevelScan:
         # stumps each read one code across all windows)
         self.blocks = cv2.transpose(blocks.reshape(by * bx, N_CODES)).reshape(N_CODES, by, bx)
 
-    # --- contour: potential maps from prefix sums, per-window maximum by sliding max (eq. 4)
+    # --- contour: potential maps from prefix sums, per-window maximum over its runs (eq. 4)
     def _contour(self, gray_c: np.ndarray, edge_threshold: float) -> None:
         n, s2 = CONTOUR_SIZE, 2 * self.stride
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
@@ -260,9 +260,7 @@ class LevelScan:
         self.px = _column_potentials(b, s2, len(y0), n, True)
         py_t = _column_potentials(cv2.transpose(b), s2, len(x0), n, False)
         self.py = np.ascontiguousarray(py_t.T)   # (H, cols): neighbouring windows' values side by side
-        run_x = cv2.dilate(self.px, np.ones((1, n), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
-        run_y = cv2.dilate(self.py, np.ones((n, 1), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
-        self.m_contour = np.maximum(run_x[:, x0], run_y[y0, :]).reshape(-1).astype(np.int64)
+        self.m_contour = _contour_maxima(self.px, self.py, s2, n, self.rows, self.cols)
         self._y0, self._x0 = y0, x0
 
     def evaluate(self, stages: PackedStages, last_stage_margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -320,16 +318,19 @@ def quantised(vector: np.ndarray) -> np.ndarray:
 def _inner_contour_image(g, edge_threshold):
     """:func:`contour_image` of ``g`` with its outermost pixels cleared (they have no full Laplacian
     neighbourhood), in one compiled pass instead of OpenCV's Laplacian, absolute value, threshold and
-    four border writes: the same integer 4-neighbour Laplacian ``|l| > edge_threshold`` per pixel."""
+    four border writes: the same integer 4-neighbour Laplacian ``|l| > edge_threshold`` per pixel, in int16
+    (``|l| <= 1020``) against ``floor(edge_threshold)`` (the same test for an integer ``l``)."""
     h, w = g.shape
     b = np.zeros((h, w), np.uint8)
+    limit = np.int16(min(max(np.floor(edge_threshold), -1.0), 1020.0))
+    four = np.int16(4)
     for y in range(1, h - 1):
         up, row, down = g[y - 1], g[y], g[y + 1]
         out = b[y]
         for x in range(1, w - 1):
-            lap = np.int32(up[x]) + np.int32(down[x]) + np.int32(row[x - 1]) + np.int32(row[x + 1]) \
-                - 4 * np.int32(row[x])
-            out[x] = 1 if abs(lap) > edge_threshold else 0
+            lap = np.int16(up[x]) + np.int16(down[x]) + np.int16(row[x - 1]) + np.int16(row[x + 1]) \
+                - four * np.int16(row[x])
+            out[x] = np.uint8(abs(lap) > limit)
     return b
 
 
@@ -347,14 +348,15 @@ def _column_potentials(b, step, rows, n, from_bottom):
     """
     height, width = b.shape
     marks = rows + n // step                 # prefix rows 2, 2 + step, ...
-    col_sum = np.zeros((marks, width), np.int64)
+    col_sum = np.zeros((marks, width), np.int32)     # counts <= height
     col_ysum = np.zeros((marks, width), np.int64)
-    run, yrun = np.zeros(width, np.int64), np.zeros(width, np.int64)
+    run, yrun = np.zeros(width, np.int32), np.zeros(width, np.int64)
     y = 0
     for k in range(marks):                   # prefix rows 2 + step k (a window may end at the last row)
         while y < min(2 + step * k, height):
+            line = b[y]
             for x in range(width):
-                v = b[y, x]
+                v = line[x]
                 run[x] += v
                 yrun[x] += y * v
             y += 1
@@ -365,9 +367,45 @@ def _column_potentials(b, step, rows, n, from_bottom):
         top = 2 + step * r
         # out = a * count + b * ysum (the branch stays out of the loop)
         a, b_ = (n + top, -1) if from_bottom else (1 - top, 1)
+        count_top, count_end = col_sum[r], col_sum[r + n // step]
+        ysum_top, ysum_end = col_ysum[r], col_ysum[r + n // step]
+        line = out[r]
         for x in range(width):
-            out[r, x] = a * (col_sum[r + n // step, x] - col_sum[r, x]) \
-                + b_ * (col_ysum[r + n // step, x] - col_ysum[r, x])
+            line[x] = a * np.int64(count_end[x] - count_top[x]) + b_ * (ysum_end[x] - ysum_top[x])
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _contour_maxima(px, py, step, n, rows, cols):
+    """Eq. 4's maximum of every window: the largest of its ``P_x`` (``px[row, x0 .. x0 + n - 1]``) and its
+    ``P_y`` (``py[y0 .. y0 + n - 1, col]``), ``x0 = 2 + step * col``, ``y0 = 2 + step * row``, as int64.
+
+    Windows start every ``step`` pixels and span ``n / step`` such runs, so each run's maximum is taken
+    once and a window's is the largest of its runs' (only the windows' own positions, not a sliding
+    maximum at every pixel)."""
+    per = n // step
+    run_x = np.empty((rows, cols + per - 1), np.float32)
+    for r in range(rows):
+        for j in range(cols + per - 1):
+            start = 2 + step * j
+            top = px[r, start]
+            for x in range(start + 1, start + step):
+                top = px[r, x] if px[r, x] > top else top
+            run_x[r, j] = top
+    run_y = np.empty((rows + per - 1, cols), np.float32)
+    for j in range(rows + per - 1):
+        start = 2 + step * j
+        run_y[j] = py[start]
+        for y in range(start + 1, start + step):
+            for c in range(cols):
+                run_y[j, c] = py[y, c] if py[y, c] > run_y[j, c] else run_y[j, c]
+    out = np.empty(rows * cols, np.int64)
+    for r in range(rows):
+        for c in range(cols):
+            top = run_x[r, c]
+            for q in range(per):
+                top = max(top, run_x[r, c + q], run_y[r + q, c])
+            out[r * cols + c] = np.int64(top)
     return out
 
 
