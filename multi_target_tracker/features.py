@@ -344,22 +344,32 @@ def _column_potentials(b, step, rows, n, from_bottom):
     ``y' < y`` of ``b`` and ``y' b`` down each column, over rows ``y0 .. y0+n-1`` the first is
     ``(n + y0) sum_Y b - sum_Y Y b`` and the second ``sum_Y Y b - (y0 - 1) sum_Y b``. The prefix sums are
     kept only where windows start and end (every ``step`` rows, as ``n`` is a multiple), each row swept
-    once across all its columns without a test per pixel.
+    once across all its columns without a test per pixel, into int32 sums of the step's rows that the
+    int64 prefix takes once a step.
     """
     height, width = b.shape
     marks = rows + n // step                 # prefix rows 2, 2 + step, ...
     col_sum = np.zeros((marks, width), np.int32)     # counts <= height
     col_ysum = np.zeros((marks, width), np.int64)
     run, yrun = np.zeros(width, np.int32), np.zeros(width, np.int64)
+    part, ypart = np.zeros(width, np.int32), np.zeros(width, np.int32)   # one step's rows: y * count < 2^31
     y = 0
     for k in range(marks):                   # prefix rows 2 + step k (a window may end at the last row)
-        while y < min(2 + step * k, height):
-            line = b[y]
+        end = min(2 + step * k, height)
+        if y < end:
+            part[:] = 0
+            ypart[:] = 0
+            while y < end:
+                line = b[y]
+                weight = np.int32(y)
+                for x in range(width):
+                    v = np.int32(line[x])
+                    part[x] += v
+                    ypart[x] += weight * v
+                y += 1
             for x in range(width):
-                v = line[x]
-                run[x] += v
-                yrun[x] += y * v
-            y += 1
+                run[x] += part[x]
+                yrun[x] += ypart[x]
         col_sum[k] = run
         col_ysum[k] = yrun
     out = np.empty((rows, width), np.float32)
