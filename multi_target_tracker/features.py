@@ -432,9 +432,10 @@ def _block_histograms(codes, cell, rows, cols):
     hc, wc = codes.shape[0] // cell, codes.shape[1] // cell
     cells = np.zeros((hc, wc * N_CODES), np.int16)
     for y in range(hc * cell):
-        line = cells[y // cell]
-        for x in range(wc * cell):
-            line[(x // cell) * N_CODES + codes[y, x]] += 1
+        line, row = cells[y // cell], codes[y]
+        for j in range(cell):                  # neighbouring counts land in different cells: no increment waits
+            for cx in range(wc):               # for the last one's store when a cell repeats a code
+                line[cx * N_CODES + row[cx * cell + j]] += 1
     per = BLOCK // cell
     hb, wb = hc - per + 1, wc - per + 1
     blocks = np.zeros((hb, wb * N_CODES), np.int16)
