@@ -476,7 +476,10 @@ def _evaluate_level(blocks, px, py, m_lbp, m_contour, rows, cols, cells_per_bloc
     whose sum reaches its threshold. Stump by stump over the surviving windows, so that each stump
     streams through one table plane. Each surviving window carries its flat offsets into the three
     tables and its two maxima (as floats), compacted after every stage: the stump loop then reads
-    ``table[offset + feature shift]`` without a division per window and stump.
+    ``table[offset + feature shift]`` without a division per window and stump. The test is in int32: raw
+    values and maxima are whole numbers (bins <= 256, potentials <= 2080) and a threshold outside
+    [0, 256] decides as 0 or 256 do (a value never exceeds its maximum), so ``255 * value`` and
+    ``t * max`` stay far below 2^31 and are exact, as they were in float64.
     """
     n = rows * cols
     alive = np.arange(n)
@@ -484,19 +487,20 @@ def _evaluate_level(blocks, px, py, m_lbp, m_contour, rows, cols, cells_per_bloc
     base_l = np.empty(n, np.int64)       # blocks[code].flat offset of the window's top-left block
     base_x = np.empty(n, np.int64)       # px.flat offset of (row, x0[col])
     base_y = np.empty(n, np.int64)       # py.flat offset of (y0[row], col)
-    ml = np.empty(n)
-    mc = np.empty(n)
+    ml = np.empty(n, np.int32)
+    mc = np.empty(n, np.int32)
     for w in range(n):
         r, c = w // cols, w % cols
         base_l[w] = r * bw + c
         base_x[w] = r * pxw + x0[c] if len(x0) == cols else 0
         base_y[w] = y0[r] * pyw + c if len(y0) == rows else 0
-        ml[w] = np.float64(m_lbp[w]) if len(m_lbp) == n else 0.0
-        mc[w] = np.float64(m_contour[w]) if len(m_contour) == n else 0.0
+        ml[w] = m_lbp[w] if len(m_lbp) == n else 0
+        mc[w] = m_contour[w] if len(m_contour) == n else 0
     flat_px, flat_py = px.ravel(), py.ravel()
     plane_size = blocks.shape[1] * bw
     flat_blocks = blocks.ravel()
     score = np.zeros(n)
+    full = np.int32(255)
     start = 0
     for s in range(len(ends)):
         m = len(alive)
@@ -504,26 +508,26 @@ def _evaluate_level(blocks, px, py, m_lbp, m_contour, rows, cols, cells_per_bloc
             break
         total = np.zeros(m)
         for j in range(start, ends[s]):
-            f, t, lo, hi = features[j], np.float64(thresholds[j]), left[j], right[j]
+            f, t, lo, hi = features[j], np.int32(min(max(thresholds[j], 0), 256)), left[j], right[j]
             if f < LBP_DIM:
                 shift = (f % N_CODES) * plane_size + (f // N_CODES // 2) * cells_per_block * bw \
                     + (f // N_CODES % 2) * cells_per_block
                 for a in range(m):
                     mx = ml[a]
-                    value = np.float64(flat_blocks[base_l[a] + shift])
-                    total[a] += hi if (mx > 0 and 255.0 * value >= t * mx) else lo
+                    value = np.int32(flat_blocks[base_l[a] + shift])
+                    total[a] += hi if (mx > 0 and full * value >= t * mx) else lo
             elif f < LBP_DIM + CONTOUR_SIZE:
                 k = f - LBP_DIM
                 for a in range(m):
                     mx = mc[a]
-                    value = np.float64(flat_px[base_x[a] + k])
-                    total[a] += hi if (mx > 0 and 255.0 * value >= t * mx) else lo
+                    value = np.int32(flat_px[base_x[a] + k])
+                    total[a] += hi if (mx > 0 and full * value >= t * mx) else lo
             else:
                 k = (f - LBP_DIM - CONTOUR_SIZE) * pyw
                 for a in range(m):
                     mx = mc[a]
-                    value = np.float64(flat_py[base_y[a] + k])
-                    total[a] += hi if (mx > 0 and 255.0 * value >= t * mx) else lo
+                    value = np.int32(flat_py[base_y[a] + k])
+                    total[a] += hi if (mx > 0 and full * value >= t * mx) else lo
         bar = last_stage_margin if s == len(ends) - 1 else 0.0
         kept = 0
         for a in range(m):               # compact the survivors and their offsets in place, in order

@@ -81,6 +81,25 @@ def test_level_scan_equals_reference_window_by_window(stride):
             assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
 
 
+def test_level_scan_cascade_with_thresholds_outside_the_feature_range():
+    """Stump thresholds below 0 and above 255 (a hand-made or foreign model): the compiled loop's integer test
+    decides them as the cascade does on the normalised vectors (always / never passing)."""
+    rng = np.random.default_rng(5)
+    frame = cv2.GaussianBlur(rng.integers(0, 255, (150, 190), dtype=np.uint8), (5, 5), 1.5)
+    scan = F.LevelScan(frame, (121, 97), 4, "fused", 12.0)
+    assert scan.m_lbp.min() > 0 and scan.m_contour.min() > 0     # every window has texture and edges
+    every = scan.vectors(np.arange(scan.n_windows))
+    stage = _random_stage(rng, every)
+    extreme = np.array([-10**6, -3, 0, 255, 256, 300, 10**6, 2**40])
+    stage.thresholds[:len(extreme)] = extreme
+    for margin in (0.0, -0.5, -3.0):
+        idx, score = scan.evaluate(Cascade((32, 32), "fused", 12.0, [stage]).packed(), margin)
+        ref_idx, ref_score = Cascade((32, 32), "fused", 12.0, [stage]).evaluate_vectors(every, margin)
+        assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
+        if margin == 0.0:
+            assert 0 < len(ref_idx) < scan.n_windows                 # the stage keeps some windows, not all
+
+
 @pytest.mark.parametrize("feature_set", ["lbp", "contour"])
 def test_level_scan_cascade_of_one_feature_set_equals_the_cascade_on_its_vectors(feature_set):
     """The compiled loop with one set of tables left empty (LBP-only and contour-only models, seed 003's Table 1),
