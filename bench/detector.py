@@ -451,7 +451,7 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
         items = fold_tiles(held, 3)
         _, raws = raw_windows(model, items)
         raws_by_fold.append(raws)
-        sizes_by_fold.append([item.load_colour().shape[1::-1] for item in items])
+        sizes_by_fold.append([item.size for item in items])        # read_yolo_folder's: no second read
         models.append(model.name)
         print(f"[box regression seed {seed}] fold {k}: {len(raws)} tiles", flush=True)
     groups = member_groups(raws_by_fold, sizes_by_fold)

@@ -49,6 +49,7 @@ class LabelledImage:
     boxes: np.ndarray
     ignore: np.ndarray | None = None   # boxes neither used as positives nor cut as negatives
     path: Path | None = None           # the image file, for an image folder's items (None: from a bag)
+    size: tuple[int, int] | None = None  # (width, height), when the reader has it (a YOLO folder's items)
 
     def load_colour(self) -> np.ndarray:
         """The image in colour (BGR uint8), as a camera gives it (the colour blobs' views read colour)."""
@@ -106,7 +107,7 @@ def read_yolo_folder(folder: str | Path, include: list[str] | None = None, exclu
         size = _image_size(image_path)
         boxes, ignore = (_yolo_boxes(r, size) for r in (rows, ignored))
         out.append(LabelledImage(image_path.name, _imread_gray(image_path), boxes, ignore if len(ignore) else None,
-                                 image_path))
+                                 image_path, size))
     if not out:
         raise TrainingDataError(f"no images in {images_dir} (after prefix filters)")
     return out

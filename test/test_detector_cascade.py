@@ -213,6 +213,9 @@ def test_train_cascade_command_on_a_yolo_folder(tmp_path, capsys):
         h, w = image.shape
         rows = [f"0 {(x + bw / 2) / w:.6f} {(y + bh / 2) / h:.6f} {bw / w:.6f} {bh / h:.6f}" for x, y, bw, bh in boxes]
         (tmp_path / "labels" / f"a_{k}.txt").write_text("\n".join(rows) + "\n")
+    from multi_target_tracker.train_cascade import read_yolo_folder
+    items = read_yolo_folder(tmp_path)
+    assert [item.size for item in items] == [image.shape[::-1]] * 8      # (width, height), known without a read
     model = tmp_path / "model.json"
     # a 60x30 window is larger than every 44..56 x 22..28 box: the trainer says so and searches from 30 px
     code = train_main(["--yolo", str(tmp_path), "--window", "60", "30", "--stages", "2", "--negatives", "100",
