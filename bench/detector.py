@@ -694,14 +694,14 @@ def main() -> int:
     if (args.no_folds or args.folds_from) and previous.is_file():
         saved = json.loads(previous.read_text())
         results["kfold"] = saved.get("kfold", saved)
-    last = HERE / "results" / "detector.json"
-    if last.is_file() and "box_regression" in json.loads(last.read_text()):   # only --box-regression runs remake it
-        results["box_regression"] = json.loads(last.read_text())["box_regression"]
     elif not args.no_folds:
         with tempfile.TemporaryDirectory(prefix="detector_folds_") as work:   # fold models are not kept
             results["kfold"] = kfold(("fused",) if args.quick else FEATURE_SETS, args.recipe, Path(work),
                                      "none" if args.quick else "crossfit",
                                      quick=args.quick)
+    last = HERE / "results" / "detector.json"
+    if last.is_file() and "box_regression" in json.loads(last.read_text()):   # only --box-regression runs remake it
+        results["box_regression"] = json.loads(last.read_text())["box_regression"]
     for fs in () if args.folds_only else FEATURE_SETS:
         model = models_dir / model_name(fs)
         if not model.is_file():
