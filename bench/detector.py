@@ -700,8 +700,9 @@ def main() -> int:
                                      "none" if args.quick else "crossfit",
                                      quick=args.quick)
     last = HERE / "results" / "detector.json"
-    if last.is_file() and "box_regression" in json.loads(last.read_text()):   # only --box-regression runs remake it
-        results["box_regression"] = json.loads(last.read_text())["box_regression"]
+    last_results = json.loads(last.read_text()) if last.is_file() else {}
+    if "box_regression" in last_results:        # only --box-regression runs remake it
+        results["box_regression"] = last_results["box_regression"]
     for fs in () if args.folds_only else FEATURE_SETS:
         model = models_dir / model_name(fs)
         if not model.is_file():

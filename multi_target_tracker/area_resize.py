@@ -34,20 +34,10 @@ def area_weights(source: int, destination: int, scale: float):
     """OpenCV's ``computeResizeAreaTab`` for one axis as ``(indices, weights)``, each ``(destination, k)``:
     row ``d`` lists the source pixels of cell ``d`` in order and their float32 weights, padded with weight 0
     (index of the cell's first pixel) to the widest cell's ``k``."""
-    first = np.empty(destination, np.int64)
-    last = np.empty(destination, np.int64)      # the cell's source pixels: first .. last (inclusive)
+    room = int(np.ceil(scale)) + 2             # a cell's pixels: a partial one each end, at most ceil(scale) whole
+    indices = np.zeros((destination, room), np.int64)
+    weights = np.zeros((destination, room), np.float32)
     widest = 1
-    for d in range(destination):
-        fs1 = d * scale
-        fs2 = fs1 + scale
-        s1, s2 = int(np.ceil(fs1)), int(np.floor(fs2))
-        s2 = min(s2, source - 1)
-        s1 = min(s1, s2)
-        first[d] = s1 - 1 if s1 - fs1 > 1e-3 else s1
-        last[d] = s2 if fs2 - s2 > 1e-3 else s2 - 1
-        widest = max(widest, last[d] - first[d] + 1)
-    indices = np.empty((destination, widest), np.int64)
-    weights = np.zeros((destination, widest), np.float32)
     for d in range(destination):
         fs1 = d * scale
         fs2 = fs1 + scale
@@ -65,8 +55,9 @@ def area_weights(source: int, destination: int, scale: float):
         if fs2 - s2 > 1e-3:
             indices[d, k], weights[d, k] = s2, np.float32(min(min(fs2 - s2, 1.0), cell) / cell)
             k += 1
-        for j in range(k, widest):
-            indices[d, j] = first[d]
+        indices[d, k:] = indices[d, 0]
+        widest = max(widest, k)
+    indices, weights = np.ascontiguousarray(indices[:, :widest]), np.ascontiguousarray(weights[:, :widest])
     return indices, weights
 
 

@@ -92,6 +92,13 @@ def mirror_scores(rows: np.ndarray, columns: np.ndarray, half_width: int) -> np.
     return np.where(norm > 0, cross / np.where(norm > 0, norm, 1.0), -1.0)
 
 
+def local_peaks(values: np.ndarray) -> np.ndarray:
+    """Indices, in order, of the entries of a 1-D array at least as large as both neighbours (the ends compared with
+    their one neighbour)."""
+    padded = np.concatenate([[-np.inf], values, [-np.inf]])
+    return np.flatnonzero((values >= padded[:-2]) & (values >= padded[2:]))
+
+
 def template_vertical(quad: np.ndarray) -> np.ndarray:
     """The mean of the tracked template's two vertical sides (TL->BL, TR->BR) in the image [px]."""
     quad = np.asarray(quad, np.float64)
@@ -160,8 +167,7 @@ def measure_nose_gear(image: np.ndarray, quad: np.ndarray, nose_in_template, gro
     rows = strip[top - half_window:top + half_window + 1]
     coarse = np.arange(half - reach, half + reach + 1, 2)
     rough = mirror_scores(rows[::2], coarse, half_window)
-    padded = np.concatenate([[-np.inf], rough, [-np.inf]])
-    peaks = np.flatnonzero((rough >= padded[:-2]) & (rough >= padded[2:]))
+    peaks = local_peaks(rough)
     near = coarse[peaks[np.argsort(-rough[peaks])[:COARSE_PEAKS]]]
     columns = np.unique(np.clip(near[:, None] + np.arange(-3, 4), half - reach, half + reach))
     scores = mirror_scores(rows, columns, half_window)
@@ -227,8 +233,8 @@ def ground_contact(profile: np.ndarray, lo: int, hi: int, above: int, below: int
     j = lo + int(np.argmax(step[lo:hi + 1]))
     if lowest > 0 and step[j] > 0:   # the lowest peak of at least ``lowest`` of the largest: under the tyre, apron
         inside = step[lo:hi + 1]
-        padded = np.concatenate([[-np.inf], inside, [-np.inf]])
-        peaks = np.flatnonzero((inside >= padded[:-2]) & (inside >= padded[2:]) & (inside >= lowest * step[j]))
+        peaks = local_peaks(inside)
+        peaks = peaks[inside[peaks] >= lowest * step[j]]
         j = lo + int(peaks[-1]) if len(peaks) else j
     rise = np.zeros_like(profile)
     rise[1:-1] = 0.5 * (profile[2:] - profile[:-2])
