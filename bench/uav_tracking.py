@@ -309,9 +309,9 @@ def markdown(results: dict) -> str:
         for name, r in variants.items():
             p = r["pooled"]
             paired = against_setup(variants["setup"]["seeds"], r["seeds"]) if name != "setup" else ""
-            lines.append(f"| {name} | {p['mota_pooled']:.3f} | {p['mota_mean']:.3f} / {p['mota_worst']:.3f} | {paired} | "
-                         f"{p['counted']} | {p['misses']} ({p['mota_points']['misses']:.2f}) | {p['false_positives']} "
-                         f"({p['mota_points']['false_positives']:.2f}) | {p['id_switches']} | "
+            lines.append(f"| {name} | {p['mota_pooled']:.3f} | {p['mota_mean']:.3f} / {p['mota_worst']:.3f} | "
+                         f"{paired} | {p['counted']} | {p['misses']} ({p['mota_points']['misses']:.2f}) | "
+                         f"{p['false_positives']} ({p['mota_points']['false_positives']:.2f}) | {p['id_switches']} | "
                          + " | ".join(f"{p['miss_causes'][c]} ({p['mota_points'][c]:.2f})" for c in MISS_CLASSES) + " |")
         lines += ["", "Detector alone as bench/uav_detector.py counts (every 4th frame, vehicles >= 70 % visible "
                   "counted): " + "; ".join(
