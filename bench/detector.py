@@ -66,6 +66,7 @@ from multi_target_tracker.train_cascade import read_yolo_folder, truncated  # no
 
 DATA = Path(os.environ.get("ADT_SHARED_DATA", REPO.parent / "shared" / "data"))
 TILES = DATA / "detect" / "drone-view-vehicles"
+RESULTS = HERE / "results" / "detector.json"   # the last run's results: modes that add to them read it
 VALIDATION = ["1_", "4_"]
 FEATURE_SETS = ("lbp", "contour", "fused")
 TRAIN_ARGS = ["--window", "64", "32", "--rotate90", "--flips", "hv", "--max-positives", "10000",
@@ -633,7 +634,7 @@ def main() -> int:
         br, regressor = kfold_box_regression(Path(args.work), args.recipe, args.seed,
                                              transfer=Path(args.transfer) if args.transfer else None,
                                              regressors_dir=Path(args.regressors) if args.regressors else None)
-        results = json.loads((HERE / "results" / "detector.json").read_text())
+        results = json.loads(RESULTS.read_text())
         if args.save_regressor:
             regressor.info["for_models"] = [model_name("fused")]    # the detector refuses it with another model
             regressor.info["scan"] = SETUP_SCAN                      # the windows it was trained on
@@ -652,7 +653,7 @@ def main() -> int:
         kf = kfold(tuple(args.feature_sets), args.recipe, work, "crossfit", seed=args.seed, reuse=True)
         kf["wall_seconds"] = time.perf_counter() - started
         (work / f"kfold_{args.recipe}_seed{args.seed}.json").write_text(json.dumps(kf, indent=1))
-        results = json.loads((HERE / "results" / "detector.json").read_text())
+        results = json.loads(RESULTS.read_text())
         add_to_comparison(results["kfold"], kf)
         if args.as_main:
             results["kfold"].update({k: v for k, v in kf.items() if k != "feature_sets"})
@@ -660,12 +661,12 @@ def main() -> int:
         write_results(results)
         return 0
     if args.synthetic_only:
-        results = json.loads((HERE / "results" / "detector.json").read_text())
+        results = json.loads(RESULTS.read_text())
         synthetic(results, args.quick)
         write_results(results)
         return 0
     if args.update_folds:
-        results = json.loads((HERE / "results" / "detector.json").read_text())
+        results = json.loads(RESULTS.read_text())
         saved = json.loads(Path(args.update_folds).read_text())
         results["kfold"] = saved.get("kfold", saved)
         write_results(results)
@@ -690,18 +691,17 @@ def main() -> int:
 
     results = {"validation_prefixes": VALIDATION, "validation_tiles": len(validation), "quick": args.quick,
                "train_seconds": train_seconds, "models_dir": str(models_dir), "detectors": {}}
-    previous = Path(args.folds_from) if args.folds_from else HERE / "results" / "detector.json"
+    last_results = json.loads(RESULTS.read_text()) if RESULTS.is_file() else None
+    previous = Path(args.folds_from) if args.folds_from else RESULTS
     if (args.no_folds or args.folds_from) and previous.is_file():
-        saved = json.loads(previous.read_text())
+        saved = json.loads(previous.read_text()) if args.folds_from else last_results
         results["kfold"] = saved.get("kfold", saved)
     elif not args.no_folds:
         with tempfile.TemporaryDirectory(prefix="detector_folds_") as work:   # fold models are not kept
             results["kfold"] = kfold(("fused",) if args.quick else FEATURE_SETS, args.recipe, Path(work),
                                      "none" if args.quick else "crossfit",
                                      quick=args.quick)
-    last = HERE / "results" / "detector.json"
-    last_results = json.loads(last.read_text()) if last.is_file() else {}
-    if "box_regression" in last_results:        # only --box-regression runs remake it
+    if last_results and "box_regression" in last_results:        # only --box-regression runs remake it
         results["box_regression"] = last_results["box_regression"]
     for fs in () if args.folds_only else FEATURE_SETS:
         model = models_dir / model_name(fs)
@@ -800,7 +800,7 @@ def add_to_comparison(kfold_results: dict, kf: dict) -> None:
 def write_results(results: dict) -> None:
     (HERE / "results").mkdir(exist_ok=True)
     (HERE / "plots").mkdir(exist_ok=True)
-    (HERE / "results" / "detector.json").write_text(json.dumps(results, indent=1))
+    RESULTS.write_text(json.dumps(results, indent=1))
     (HERE / "results" / "detector.md").write_text(markdown(results, results.get("quick", False)))
     plots(results)
     print((HERE / "results" / "detector.md").read_text())
