@@ -24,6 +24,8 @@ whole-number factor, an axis that grows, the same size) is OpenCV's own call.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numba
 import numpy as np
@@ -102,6 +104,13 @@ def _vertical(horizontal, indices, weights):
     return out
 
 
+@lru_cache(maxsize=256)
+def _axis_weights(source: int, destination: int, scale: float):
+    """:func:`area_weights`, kept: a pyramid resizes every frame to the same level sizes, so each axis' table is
+    computed once, not twice a level and frame (the passes only read it)."""
+    return area_weights(source, destination, scale)
+
+
 def resize_area(gray: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """``cv2.resize(gray, size, interpolation=cv2.INTER_AREA)`` of a uint8 grey image, the same bits; ``size`` is
     ``(width, height)``."""
@@ -111,5 +120,5 @@ def resize_area(gray: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     whole = abs(scale_x - round(scale_x)) < np.finfo(float).eps and abs(scale_y - round(scale_y)) < np.finfo(float).eps
     if gray.dtype != np.uint8 or scale_x < 1 or scale_y < 1 or whole:
         return cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
-    horizontal = _horizontal(cv2.transpose(gray), *area_weights(width, new_width, scale_x))
-    return _vertical(cv2.transpose(horizontal), *area_weights(height, new_height, scale_y))
+    horizontal = _horizontal(cv2.transpose(gray), *_axis_weights(width, new_width, scale_x))
+    return _vertical(cv2.transpose(horizontal), *_axis_weights(height, new_height, scale_y))
