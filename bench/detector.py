@@ -210,7 +210,7 @@ def raw_windows(model: Path, items, margin: float = min(GRID_MARGIN)):
     out = []
     for item in items:
         image = item.load_colour()
-        boxes, scores = det.raw(image)
+        boxes, scores, _ = det.raw(image)   # the drone-view set-up groups upright boxes
         out.append((boxes, scores, item.boxes, truncated(item.boxes, image.shape[1::-1], BORDER_MARGIN)))
     return det.config, out
 

@@ -153,9 +153,10 @@ def group_confidences(det: Detector, image: np.ndarray) -> tuple[np.ndarray, dic
     """The set-up's groups of one frame (every group of at least ``VERIFIER_MIN_WINDOWS`` windows; boxes as
     ``detect`` scales them) and each confidence of :data:`CONFIDENCES` per group."""
     cfg = det.config
-    group_boxes, counts, margin_sums, best = group_stats(*det.raw(image),
-                                                         cfg.group_iou, cfg.window_margin,
-                                                         min_count=VERIFIER_MIN_WINDOWS)
+    windows = det.raw(image)
+    group_boxes, counts, margin_sums, best = group_stats(windows.boxes, windows.margins, cfg.group_iou,
+                                                         cfg.window_margin, VERIFIER_MIN_WINDOWS,
+                                                         det.group_quads(windows))
     confidences = {"count": counts + expit(best), "margin_sum": margin_sums, "best_margin": best}
     if det.verifier is not None:
         confidences["verifier"] = det.verifier.logit(features(image, group_boxes, counts, margin_sums, best))
@@ -248,11 +249,12 @@ def miss_breakdown(detectors: dict, seeds: list[tuple[int, int]]) -> dict:
                 if cfg.blob_views not in raws:
                     raws[cfg.blob_views] = det.raw(image)
                 raw = raws[cfg.blob_views]
-                boxes, logit = det.candidates(image, *raw, cfg.window_margin)
+                boxes, logit = det.candidates(image, raw, cfg.window_margin)
                 boxes = scale_boxes(boxes, cfg.box_scale) if len(boxes) else boxes
-                final, scores = det.verified(image, *raw, cfg.window_margin)
+                final, scores = det.verified(image, raw, cfg.window_margin)
                 final = scale_boxes(final, cfg.box_scale) if len(final) else final
-                small = scale_boxes(group_stats(*raw, cfg.group_iou, cfg.window_margin)[0], cfg.box_scale)
+                small = scale_boxes(group_stats(raw.boxes, raw.margins, cfg.group_iou, cfg.window_margin,
+                                                quads=det.group_quads(raw))[0], cfg.box_scale)
                 matched, _ = match_frame(final, scores, truth, 0.5, ignore)
                 iou_det, iou_group, iou_small = (box_iou(b[:, None], truth[None]) if len(b) and len(truth)
                                                  else np.zeros((len(b), len(truth))) for b in (final, boxes, small))

@@ -29,6 +29,9 @@ window on the stride grid) and whose score is
     score = n + 1 / (1 + exp(-m))      (n windows in the group, m the best member's margin)
 
 so the integer part is OpenCV's neighbour count and the fraction orders groups of equal size.
+With ``group_shape = turned`` the overlap is that of the windows' own rectangles as their views turned
+them (:func:`map_back` keeps those corners): two vehicles side by side at 45 degrees have upright boxes
+that overlap by far more than the vehicles do, and their windows would fall into one group.
 Groups with fewer than ``min_neighbors`` windows are dropped, then every group lying at least
 ``containment`` inside a better one (intersection over the smaller area) is suppressed: vehicles
 seen from above or an aircraft on a stand do not overlap, but a window on half a car does.
@@ -50,6 +53,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import numba
@@ -72,6 +76,16 @@ DEFAULT_MODEL = "drone_vehicles_fused.json"
 
 class DetectorError(ValueError):
     """Bad detector input (image, region of interest) or configuration."""
+
+
+class Windows(NamedTuple):
+    """The windows a cascade passes in one frame (:meth:`Detector.raw`): their upright boxes ``(n, 4)`` x, y, w, h
+    in the frame, last-stage margins ``(n,)`` and turned corners ``(n, 4, 2)`` (the window's own rectangle as its
+    view turned it; the box's corners for an upright view)."""
+
+    boxes: np.ndarray
+    margins: np.ndarray
+    quads: np.ndarray
 
 
 @dataclass
@@ -120,6 +134,9 @@ class DetectorConfig:
                                "canvas); 0: the whole canvas", low=0.0, high=4.0)
     group_iou: float = param(0.3, "a window joins a group when it overlaps the group's best window by this "
                              "IoU", low=0.0, high=1.0)
+    group_shape: str = param("upright", "what group_iou compares: upright (each window's upright box in the frame) or "
+                             "turned (the window's own rectangle as its view turned it: two vehicles side by side at "
+                             "45 degrees overlap far less than their upright boxes do)", choices=("upright", "turned"))
     min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
                                "detection score is this count plus a fraction (default chosen by k-fold by video "
                                "for the shipped drone-view model)", low=1, high=100)
@@ -326,17 +343,21 @@ def turned_view(gray: np.ndarray, angle: float, border: int = 0,
     return view, cv2.invertAffineTransform(turn)
 
 
-def map_back(boxes: np.ndarray, scores: np.ndarray, back: np.ndarray, frame_size: tuple[int, int]):
+def map_back(boxes: np.ndarray, scores: np.ndarray, back: np.ndarray, frame_size: tuple[int, int],
+             with_quads: bool = False):
     """Windows of a turned view (x, y, w, h in its pixels) as the upright boxes of their turned corners in
-    the frame, clipped to it; windows whose centre falls outside the frame are dropped."""
+    the frame, clipped to it; windows whose centre falls outside the frame are dropped. ``with_quads``: also
+    those corners ``(n, 4, 2)``, unclipped (the windows' own rectangles in the frame)."""
     if back is None or not len(boxes):
-        return boxes, scores
+        return (boxes, scores, box_to_quad(boxes).reshape(-1, 4, 2)) if with_quads else (boxes, scores)
     mapped = box_to_quad(boxes) @ back[:, :2].T + back[:, 2]         # the windows' corners in the frame
     lo, hi = mapped.min(axis=1), mapped.max(axis=1)
     centre = (lo + hi) / 2
     width, height = frame_size
     inside = (centre[:, 0] >= 0) & (centre[:, 0] < width) & (centre[:, 1] >= 0) & (centre[:, 1] < height)
     lo, hi = np.maximum(lo[inside], 0), np.minimum(hi[inside], (width, height))
+    if with_quads:
+        return np.column_stack([lo, hi - lo]), scores[inside], mapped[inside]
     return np.column_stack([lo, hi - lo]), scores[inside]
 
 
@@ -449,9 +470,87 @@ def _group_labels(boxes, group_iou):
     return label, seeds[:groups]
 
 
-def group_members(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3):
+@numba.njit(cache=True, nogil=True)
+def _polygon_area(xs, ys, n):
+    """Area of the polygon ``xs[:n], ys[:n]`` (shoelace; either vertex order)."""
+    total = 0.0
+    for i in range(n):
+        j = (i + 1) % n
+        total += xs[i] * ys[j] - xs[j] * ys[i]
+    return abs(0.5 * total)
+
+
+@numba.njit(cache=True, nogil=True)
+def quad_intersection(a, b):
+    """Area of the intersection of two convex quadrilaterals ``(4, 2)``, either vertex order: ``a`` clipped by each
+    edge of ``b`` (Sutherland-Hodgman). The grouping's compiled form of ``cv2.intersectConvexConvex`` (the metrics'
+    ``polygon_iou`` calls OpenCV once per pair; the grouping tests thousands of pairs a frame)."""
+    xs, ys, next_x, next_y = np.empty(8), np.empty(8), np.empty(8), np.empty(8)
+    for i in range(4):
+        xs[i], ys[i] = a[i, 0], a[i, 1]
+    n = 4
+    turn = 0.0                                     # b's orientation: inside is on this side of each edge
+    for i in range(4):
+        j = (i + 1) % 4
+        turn += b[i, 0] * b[j, 1] - b[j, 0] * b[i, 1]
+    sign = 1.0 if turn >= 0 else -1.0
+    for e in range(4):
+        if n < 3:
+            return 0.0
+        ex, ey = b[e, 0], b[e, 1]
+        dx, dy = b[(e + 1) % 4, 0] - ex, b[(e + 1) % 4, 1] - ey
+        m = 0
+        for i in range(n):
+            px, py, qx, qy = xs[i], ys[i], xs[(i + 1) % n], ys[(i + 1) % n]
+            side_p = sign * (dx * (py - ey) - dy * (px - ex))
+            side_q = sign * (dx * (qy - ey) - dy * (qx - ex))
+            if side_p >= 0:
+                next_x[m], next_y[m] = px, py
+                m += 1
+            if (side_p >= 0) != (side_q >= 0):     # the edge pq crosses b's edge: keep the crossing
+                t = side_p / (side_p - side_q)
+                next_x[m], next_y[m] = px + t * (qx - px), py + t * (qy - py)
+                m += 1
+        n = m
+        xs[:n], ys[:n] = next_x[:n], next_y[:n]
+    return _polygon_area(xs, ys, n) if n >= 3 else 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _group_labels_turned(boxes, quads, group_iou):
+    """:func:`_group_labels` by the IoU of the windows' turned rectangles ``quads`` ``(n, 4, 2)``; their upright
+    ``boxes`` first rule out the pairs that cannot overlap."""
+    n = len(boxes)
+    label = np.full(n, -1, np.int64)
+    seeds = np.empty(n, np.int64)
+    area = np.empty(n)
+    for i in range(n):
+        area[i] = _polygon_area(quads[i, :, 0], quads[i, :, 1], 4)
+    groups = 0
+    for s in range(n):
+        if label[s] >= 0:
+            continue
+        label[s] = groups
+        seeds[groups] = s
+        ax, ay, aw, ah = boxes[s, 0], boxes[s, 1], boxes[s, 2], boxes[s, 3]
+        for j in range(s + 1, n):
+            if label[j] >= 0:
+                continue
+            bx, by, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
+            if min(ax + aw, bx + bw) <= max(ax, bx) or min(ay + ah, by + bh) <= max(ay, by):
+                continue
+            inter = quad_intersection(quads[s], quads[j])
+            union = area[s] + area[j] - inter
+            if union > 0.0 and inter / union >= group_iou:
+                label[j] = groups
+        groups += 1
+    return label, seeds[:groups]
+
+
+def group_members(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, quads: np.ndarray | None = None):
     """The groups of :func:`group_windows` before any is dropped: ``(boxes, margins, label, seeds)`` with the
     windows sorted best margin first, each window's group label and each group's seed (best) window.
+    With ``quads`` (the windows' turned corners, ``(n, 4, 2)``) ``group_iou`` is their overlap, not the boxes'.
     Benchmarks score other group confidences from it (e.g. the members' summed margins)."""
     boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
     margins = np.asarray(margins, np.float64).reshape(-1)
@@ -459,16 +558,22 @@ def group_members(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     boxes, margins = np.ascontiguousarray(boxes[order]), margins[order]
     if len(boxes) == 0:
         return boxes, margins, np.zeros(0, np.int64), np.zeros(0, np.int64)
-    label, seeds = _group_labels(boxes, float(group_iou))
+    if quads is None:
+        label, seeds = _group_labels(boxes, float(group_iou))
+    else:
+        quads = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+        if len(quads) != len(order):
+            raise ValueError(f"{len(quads)} turned windows for {len(order)} boxes")
+        label, seeds = _group_labels_turned(boxes, np.ascontiguousarray(quads[order]), float(group_iou))
     return boxes, margins, label, seeds
 
 
 def group_stats(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, margin_floor: float = 0.0,
-                min_count: int = 1):
+                min_count: int = 1, quads: np.ndarray | None = None):
     """The groups of :func:`group_members` of at least ``min_count`` windows: ``(boxes, counts, margin_sums,
     best_margins)`` with the mean box of each group, its number of windows, its members' margins above
     ``margin_floor`` summed (OpenCV's level weights) and its best member's margin."""
-    return members_stats(*group_members(boxes, margins, group_iou), margin_floor, min_count)[1:]
+    return members_stats(*group_members(boxes, margins, group_iou, quads), margin_floor, min_count)[1:]
 
 
 def members_stats(boxes: np.ndarray, margins: np.ndarray, label: np.ndarray, seeds: np.ndarray,
@@ -486,13 +591,15 @@ def members_stats(boxes: np.ndarray, margins: np.ndarray, label: np.ndarray, see
 
 
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
-                  containment: float = 0.4, max_detections: int = 500) -> tuple[np.ndarray, np.ndarray]:
+                  containment: float = 0.4, max_detections: int = 500,
+                  quads: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Raw windows ``(n, 4)`` and their last-stage margins -> grouped ``(boxes, scores)``, best first.
 
     See the module docstring: mean box per group, score = windows in the group + logistic of the best
-    margin, groups smaller than ``min_neighbors`` dropped, contained groups suppressed.
+    margin, groups smaller than ``min_neighbors`` dropped, contained groups suppressed. With ``quads`` the
+    windows are grouped by the overlap of their turned rectangles (:func:`group_members`).
     """
-    group_boxes, counts, _, best = group_stats(boxes, margins, group_iou, min_count=min_neighbors)
+    group_boxes, counts, _, best = group_stats(boxes, margins, group_iou, min_count=min_neighbors, quads=quads)
     if len(counts) == 0:
         return np.zeros((0, 4)), np.zeros(0)
     group_scores = counts + expit(best)
@@ -532,12 +639,21 @@ class Detector:
         """Whether :meth:`detect` needs a BGR image (a colour verifier or ``blob_views`` is configured)."""
         return self.verifier is not None or (self.cascade is not None and self.config.blob_views)
 
-    def raw(self, image: np.ndarray, last_stage_margin: float | None = None):
-        """Ungrouped windows ``(boxes, scores)`` in ``image``'s pixels (grey, or BGR: ``blob_views`` needs colour),
-        both orientations if configured, and the windows of the colour blobs' views with ``blob_views``."""
+    def raw(self, image: np.ndarray, last_stage_margin: float | None = None) -> Windows:
+        """Ungrouped :class:`Windows` in ``image``'s pixels (grey, or BGR: ``blob_views`` needs colour), both
+        orientations if configured, and the windows of the colour blobs' views with ``blob_views``."""
         return self._raw(image, to_gray(image), last_stage_margin)
 
-    def _raw(self, image: np.ndarray, gray: np.ndarray, last_stage_margin: float | None):
+    def group_quads(self, windows: Windows) -> np.ndarray | None:
+        """What the grouping overlaps besides the boxes: the windows' turned rectangles with ``group_shape``
+        turned, else None (the grouping functions' ``quads``)."""
+        return windows.quads if self.config.group_shape == "turned" else None
+
+    def members(self, windows: Windows):
+        """:func:`group_members` of ``windows`` as this detector groups them (``group_iou``, ``group_shape``)."""
+        return group_members(windows.boxes, windows.margins, self.config.group_iou, self.group_quads(windows))
+
+    def _raw(self, image: np.ndarray, gray: np.ndarray, last_stage_margin: float | None) -> Windows:
         """:meth:`raw` of ``image`` whose grey version ``gray`` the caller has already."""
         cfg = self.config
         margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
@@ -555,10 +671,11 @@ class Detector:
             scan = lambda job: scan_level(job[0], self.cascade, job[3], job[4], margin)  # noqa: E731
             levels = list(self.pool.map(scan, jobs) if self.pool is not None else map(scan, jobs))
             frame = gray.shape[::-1]
-            mapped = [map_back(b[:, [1, 0, 3, 2]] if job[1] else b, sc, job[2], frame)
+            mapped = [map_back(b[:, [1, 0, 3, 2]] if job[1] else b, sc, job[2], frame, with_quads=True)
                       for job, (b, sc, _) in zip(jobs, levels)]
-            return (np.vstack([b for b, _ in mapped]) if mapped else np.zeros((0, 4)),
-                    np.concatenate([sc for _, sc in mapped]) if mapped else np.zeros(0))
+            if not mapped:
+                return Windows(np.zeros((0, 4)), np.zeros(0), np.zeros((0, 4, 2)))
+            return Windows(*(np.concatenate([m[k] for m in mapped]) for k in range(3)))
         all_boxes, all_scores = [], []
         for view, transposed in views:
             boxes, scores = self.opencv.detect(view, cfg.scale_factor, cfg.min_neighbors, self.min_size, self.max_size)
@@ -566,7 +683,8 @@ class Detector:
                 boxes = boxes[:, [1, 0, 3, 2]]
             all_boxes.append(boxes)
             all_scores.append(scores)
-        return np.vstack(all_boxes), np.concatenate(all_scores)
+        boxes = np.vstack(all_boxes)
+        return Windows(boxes, np.concatenate(all_scores), box_to_quad(boxes).reshape(-1, 4, 2))
 
     def blob_canvases(self, image: np.ndarray, gray: np.ndarray) -> list[tuple[np.ndarray, float, np.ndarray]]:
         """``(canvas, scale, canvas-to-frame affine)`` of each colour blob of ``image`` (:mod:`blob_views`)."""
@@ -593,19 +711,20 @@ class Detector:
             if gray.size == 0:
                 raise DetectorError(f"roi {cfg.roi} lies outside the {frame_width}x{frame_height} frame")
         try:
-            boxes, scores = self._raw(image, gray, last_stage_margin)
+            windows = self._raw(image, gray, last_stage_margin)
         except FeatureError as exc:
             raise DetectorError(str(exc)) from exc
+        boxes, scores = windows.boxes, windows.margins
         low = None
         if self.verifier is not None:
-            boxes, scores, low = self._verified(image, boxes, scores,
+            boxes, scores, low = self._verified(image, windows,
                                                 cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.box_regressor is not None:
-            boxes, scores = self._regressed(boxes, scores, gray.shape[::-1],
+            boxes, scores = self._regressed(windows, gray.shape[::-1],
                                             cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.cascade is not None:
             boxes, scores = group_windows(boxes, scores, cfg.group_iou, cfg.min_neighbors, cfg.containment,
-                                          cfg.max_detections)
+                                          cfg.max_detections, self.group_quads(windows))
         else:  # OpenCV grouped already (minNeighbors); the two orientations only need merging
             keep = suppress_contained(boxes, scores, cfg.containment, cfg.max_detections)
             boxes, scores = boxes[keep], scores[keep]
@@ -618,12 +737,12 @@ class Detector:
         out["score"], out["class_id"] = scores, cfg.class_id
         return out
 
-    def _groups(self, boxes: np.ndarray, margins: np.ndarray, margin_floor: float, frame_size: tuple[int, int]):
+    def _groups(self, windows: Windows, margin_floor: float, frame_size: tuple[int, int]):
         """The groups of at least ``min_neighbors`` windows: ``(mean boxes, boxes refined by the box regressor (the
         mean boxes without one), counts, margin sums, best margins, box regression features (None without a
         regressor))``."""
         cfg = self.config
-        members = group_members(boxes, margins, cfg.group_iou)
+        members = self.members(windows)
         kept, group_boxes, counts, margin_sums, best = members_stats(*members, margin_floor, cfg.min_neighbors)
         refined, regression = group_boxes, None
         if self.box_regressor is not None and len(group_boxes):
@@ -632,32 +751,32 @@ class Detector:
             refined = self.box_regressor.refine(group_boxes, regression)
         return group_boxes, refined, counts, margin_sums, best, regression
 
-    def candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+    def candidates(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
         """Every group of at least ``min_neighbors`` windows before the verifier decides: ``(boxes, log odds)``,
         the boxes refined by the box regressor's member statistics if one is configured (before its image stages
         and ``box_scale``)."""
-        return self._candidates(bgr, boxes, margins, margin_floor)[:2]
+        return self._candidates(bgr, windows, margin_floor)[:2]
 
-    def _candidates(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+    def _candidates(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
         """:meth:`candidates` and the groups' box regression features (None without a box regressor)."""
-        group_boxes, refined, counts, margin_sums, best, regression = self._groups(boxes, margins, margin_floor,
+        group_boxes, refined, counts, margin_sums, best, regression = self._groups(windows, margin_floor,
                                                                                    bgr.shape[1::-1])
         colour_box = refined if self.verifier.colour_box == "refined" else group_boxes
         logit = self.verifier.logit(features(bgr, colour_box, counts, margin_sums, best))
         return refined, logit, regression
 
-    def _regressed(self, boxes: np.ndarray, margins: np.ndarray, frame_size: tuple[int, int], margin_floor: float):
+    def _regressed(self, windows: Windows, frame_size: tuple[int, int], margin_floor: float):
         """:func:`group_windows` with each group's mean box refined by the box regressor before containment
         (no verifier: the drone-view set-up's)."""
         cfg = self.config
-        _, group_boxes, counts, _, best, _ = self._groups(boxes, margins, margin_floor, frame_size)
+        _, group_boxes, counts, _, best, _ = self._groups(windows, margin_floor, frame_size)
         if not len(group_boxes):
             return np.zeros((0, 4)), np.zeros(0)
         scores = counts + expit(best)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
         return group_boxes[keep], scores[keep]
 
-    def _verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+    def _verified(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
         """The :meth:`candidates` that the colour verifier accepts, scored by its probability, contained ones dropped:
         ``(boxes, scores, low)``, ``low`` None without ``low_confidence_band``, else the mask of the groups published
         low-confidence (log odds within the band below ``verifier_threshold``). Containment keeps the better score
@@ -665,7 +784,7 @@ class Detector:
         (``max_detections`` aside). The box regressor's image stages, if any, move the accepted groups' boxes (each
         box on its own, so the same with any band) before containment."""
         cfg = self.config
-        group_boxes, logit, regression = self._candidates(bgr, boxes, margins, margin_floor)
+        group_boxes, logit, regression = self._candidates(bgr, windows, margin_floor)
         band = cfg.low_confidence_band
         accepted = logit >= cfg.verifier_threshold - band
         group_boxes, logit = group_boxes[accepted], logit[accepted]
@@ -675,8 +794,8 @@ class Detector:
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
         return group_boxes[keep], scores[keep], (logit[keep] < cfg.verifier_threshold) if band > 0 else None
 
-    def verified(self, bgr: np.ndarray, boxes: np.ndarray, margins: np.ndarray, margin_floor: float):
+    def verified(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
         """:meth:`_verified`'s detections proper ``(boxes, scores)``, without the low-confidence ones (what the
         verifier accepts at ``verifier_threshold``; tuning tools and the detector bench count these)."""
-        group_boxes, scores, low = self._verified(bgr, boxes, margins, margin_floor)
+        group_boxes, scores, low = self._verified(bgr, windows, margin_floor)
         return (group_boxes, scores) if low is None else (group_boxes[~low], scores[~low])

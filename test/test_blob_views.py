@@ -125,8 +125,8 @@ def test_blob_views_add_windows_around_the_blobs_and_leave_the_scan_alone():
                                seed=UAV_TUNING_SEEDS[0]).frames()))
     plain = build_processor("detector", SETUP, {"blob_views": False}).detector
     viewed = build_processor("detector", SETUP, {"blob_views": True}).detector
-    boxes, scores = plain.raw(frame.image)
-    more_boxes, more_scores = viewed.raw(frame.image)
+    boxes, scores, _ = plain.raw(frame.image)
+    more_boxes, more_scores, _ = viewed.raw(frame.image)
     n = len(boxes)
     assert len(more_boxes) > n
     assert np.array_equal(more_boxes[:n], boxes) and np.array_equal(more_scores[:n], scores)

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from aircraft_docking_tracker.config import ConfigError, load_yaml_parameters, package_config_dir, validate
-from aircraft_docking_tracker.geometry import box_iou
+from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from conftest import require_data
 from multi_target_tracker.box_regression import (
     FEATURES, BoxRegressor, BoxRegressorError, ImageStage, apply_offsets, edge_offsets, fit_box_regressor,
     fit_image_stage, image_feature_names, image_features, image_stage_features, member_features)
-from multi_target_tracker.detector import MODELS_DIR, Detector, DetectorConfig, group_members, members_stats
+from multi_target_tracker.detector import MODELS_DIR, Detector, DetectorConfig, Windows, group_members, members_stats
 from multi_target_tracker.train_cascade import read_yolo_folder, truncated
 from multi_target_tracker.verifier import FEATURES as VERIFIER_FEATURES, Verifier
 
@@ -112,7 +112,8 @@ def test_a_box_regressor_without_the_verifier_moves_the_groups_and_keeps_their_s
     detectors = [Detector(DetectorConfig(min_neighbors=2, containment=1.0, window_margin=1.0, **extra))
                  for extra in ({"box_regressor": ""}, {"box_regressor": str(regressor)})]
     for det in detectors:
-        det._raw = lambda image, gray, margin: (windows, margins)   # the scan behind detect()
+        # the scan behind detect()
+        det._raw = lambda image, gray, margin: Windows(windows, margins, box_to_quad(windows))
     plain, moved = detectors
     assert plain.box_regressor is None and moved.box_regressor is not None
     a, b = plain.detect(image), moved.detect(image)
@@ -248,6 +249,7 @@ def _without_and_with(verifier, regressor):
     for extra in ({}, {"box_regressor": str(regressor)}):
         det = Detector(validate(DetectorConfig(model="uav_vehicles_heading_all_views.json", verifier=str(verifier),
                                                min_neighbors=2, containment=1.0, window_margin=1.0, **extra)))
-        det._raw = lambda image, gray, margin: (windows, margins)   # the scan behind detect()
+        # the scan behind detect()
+        det._raw = lambda image, gray, margin: Windows(windows, margins, box_to_quad(windows))
         found.append(det.detect(image))
     return found

@@ -326,7 +326,7 @@ def test_negative_miner_scans_the_detectors_turned_views(tiny_model, tmp_path):
     vectors, accepted = turned._scan(one_stage, image, boxes, None)
     detector = Detector(DetectorConfig(model=str(tmp_path / "one.json"), angles=[0.0, 45.0], orientation="both",
                                        stride=4, scale_factor=1.15, min_size=20, max_size=30))
-    windows, _ = detector.raw(image, 0.0)
+    windows = detector.raw(image, 0.0).boxes
     away = box_iou(windows[:, None, :], boxes[None, :, :]).max(axis=1) < 0.3
     assert accepted == len(vectors) == int(away.sum())
     assert accepted > upright._scan(one_stage, image, boxes, None)[1]

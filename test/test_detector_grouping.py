@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.special import expit
 
-from aircraft_docking_tracker.geometry import box_iou
+from aircraft_docking_tracker.geometry import box_iou, box_to_quad, quad_to_box
 from multi_target_tracker.detector import Detector, DetectorConfig, group_windows, suppress_contained
 from multi_target_tracker.train_cascade import read_yolo_folder
 
@@ -78,7 +78,7 @@ def test_grouping_matches_the_python_loop_on_real_tiles(shared_data, settings):
     det = Detector(DetectorConfig(window_margin=-1.0))   # below the trained margin: many raw windows
     total = 0
     for item in tiles[::40][:6]:
-        boxes, margins = det.raw(item.load())
+        boxes, margins, _ = det.raw(item.load())
         total += len(boxes)
         _same(boxes, margins, settings)
     assert total > 500   # the comparison saw real crowds of overlapping windows
@@ -162,3 +162,75 @@ def test_turned_crop_keeps_the_central_square_of_the_turned_view():
     inner = (slice(8, side - 8), slice(8, side - 8))
     assert np.abs(crop[inner].astype(int) - whole[y0:y0 + side, x0:x0 + side][inner].astype(int)).mean() < 3
     assert turned_view(gray, 0.0, crop=1.1)[0] is gray and turned_view(gray, 0.0, 32, crop=1.1)[0].shape == (304, 384)
+
+
+def _turned_rectangle(centre, size, angle):
+    """Corners (4, 2) of a ``size`` (length, width) rectangle about ``centre`` turned by ``angle`` degrees."""
+    return cv2.boxPoints((tuple(map(float, centre)), tuple(map(float, size)), float(angle))).astype(np.float64)
+
+
+def test_quad_intersection_is_opencvs_on_turned_rectangles():
+    """The grouping's compiled convex-quadrilateral intersection gives OpenCV's area, in either vertex order, and the
+    plain cases exactly: disjoint 0, one inside the other its own area, a quarter overlap a quarter."""
+    from multi_target_tracker.detector import quad_intersection
+
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        a = _turned_rectangle(rng.uniform(0, 60, 2), rng.uniform(4, 40, 2), rng.uniform(0, 180))
+        b = _turned_rectangle(rng.uniform(0, 60, 2), rng.uniform(4, 40, 2), rng.uniform(0, 180))
+        b = b[::-1].copy() if rng.random() < 0.5 else b
+        expected, _ = cv2.intersectConvexConvex(a.astype(np.float32), b.astype(np.float32))
+        assert quad_intersection(a, b) == pytest.approx(expected, rel=1e-4, abs=1e-3)
+    square = box_to_quad(np.array([0.0, 0.0, 10.0, 10.0]))[0]
+    assert quad_intersection(square, box_to_quad(np.array([20.0, 0.0, 10.0, 10.0]))[0]) == 0.0
+    assert quad_intersection(square, box_to_quad(np.array([2.0, 3.0, 4.0, 5.0]))[0]) == pytest.approx(20.0)
+    assert quad_intersection(square, box_to_quad(np.array([5.0, 5.0, 10.0, 10.0]))[0]) == pytest.approx(25.0)
+
+
+def test_turned_grouping_keeps_two_diagonal_neighbours_apart():
+    """Two vehicles side by side along 45 degrees, three windows each (48x24, 4 px apart along the vehicle, 20 px
+    between the vehicles' axes): their upright boxes overlap by IoU 0.35 across the vehicles (one group), their own
+    rectangles by 0.09 (two groups, each the mean of its own vehicle's windows)."""
+    axis, across = np.array([1.0, 1.0]) / np.sqrt(2), np.array([-1.0, 1.0]) / np.sqrt(2)
+    centres = [np.array([200.0, 200.0]) + k * 20.0 * across + shift * axis for k in (0, 1) for shift in (-4, 0, 4)]
+    quads = np.array([_turned_rectangle(c, (48, 24), 45.0) for c in centres])
+    boxes = quad_to_box(quads)
+    margins = np.array([3.0, 2.0, 1.0, 2.5, 1.5, 0.5])
+    assert box_iou(boxes[0], boxes[3:]).min() > 0.33                              # upright: the neighbours join
+    upright, _ = group_windows(boxes, margins, 0.3, min_neighbors=1, containment=1.0)
+    turned, _ = group_windows(boxes, margins, 0.3, min_neighbors=1, containment=1.0, quads=quads)
+    assert len(upright) == 1 and len(turned) == 2
+    np.testing.assert_allclose(np.sort(turned[:, 0]), np.sort([boxes[:3, 0].mean(), boxes[3:, 0].mean()]))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_turned_grouping_of_upright_windows_is_the_upright_grouping(seed):
+    """Windows whose rectangles are their own upright boxes group the same either way (random crowds)."""
+    rng = np.random.default_rng(seed)
+    boxes = np.column_stack([rng.uniform(0, 200, (300, 2)), rng.uniform(10, 60, (300, 2))])
+    margins = rng.normal(0, 1, 300)
+    upright = group_windows(boxes, margins, 0.3, min_neighbors=2, containment=0.5)
+    turned = group_windows(boxes, margins, 0.3, min_neighbors=2, containment=0.5, quads=box_to_quad(boxes))
+    for a, b in zip(upright, turned):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+
+
+def test_raw_windows_carry_their_turned_rectangles():
+    """Each raw window of the UAV set-up (upright, 45-degree and blob views) comes with its own rectangle in the
+    frame, whose upright box clipped to the frame is the window's box; the 45-degree views' are turned."""
+    from aircraft_docking_tracker.config import package_config_dir
+    from aircraft_docking_tracker.offline import build_processor
+    from aircraft_docking_tracker.scenarios.uav import (UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
+                                                        UavSceneConfig)
+
+    frame = next(iter(UavScene(UavSceneConfig(frames=80, fps=10.0, ground_resolution=UAV_SETUP_GROUND_RESOLUTION),
+                               seed=UAV_TUNING_SEEDS[0]).frames()))
+    detector = build_processor("detector", package_config_dir() / "uav_camera.yaml", {}).detector
+    windows = detector.raw(frame.image)
+    assert len(windows.boxes) > 30 and windows.quads.shape == (len(windows.boxes), 4, 2)
+    lo = np.maximum(windows.quads.min(axis=1), 0)
+    hi = np.minimum(windows.quads.max(axis=1), frame.image.shape[1::-1])
+    np.testing.assert_allclose(np.column_stack([lo, hi - lo]), windows.boxes, atol=1e-9)
+    edge = windows.quads[:, 1] - windows.quads[:, 0]
+    angle = np.degrees(np.arctan2(edge[:, 1], edge[:, 0])) % 90
+    assert ((angle > 40) & (angle < 50)).sum() > 0.2 * len(angle)               # the 45-degree views' windows

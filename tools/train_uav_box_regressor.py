@@ -31,7 +31,7 @@ sys.path.insert(0, str(REPO / "tools"))
 from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
 from multi_target_tracker.box_regression import (  # noqa: E402
     edge_offsets, fit_box_regressor, fit_image_stage, image_stage_features, member_features)
-from multi_target_tracker.detector import MODELS_DIR, Detector, group_members, members_stats  # noqa: E402
+from multi_target_tracker.detector import MODELS_DIR, Detector, members_stats  # noqa: E402
 from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from train_uav_verifier import (  # noqa: E402
@@ -45,7 +45,7 @@ def samples(det: Detector, seeds) -> tuple[np.ndarray, np.ndarray]:
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, 4):
             counted = truth[~ignore]
-            members = group_members(*det.raw(bgr), cfg.group_iou)
+            members = det.members(det.raw(bgr))
             kept, group_boxes, *_ = members_stats(*members, cfg.window_margin, cfg.min_neighbors)
             if not len(group_boxes) or not len(counted):
                 continue
@@ -70,8 +70,7 @@ def published_groups(det: Detector, seeds, every: int) -> list[tuple]:
     out = []
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, every, min_visible=0.3):
-            boxes, margins = det.raw(bgr)
-            refined, logit, regression = det._candidates(bgr, boxes, margins, cfg.window_margin)
+            refined, logit, regression = det._candidates(bgr, det.raw(bgr), cfg.window_margin)
             keep = logit >= floor
             counted = truth[~ignore]
             if not keep.any() or not len(counted):

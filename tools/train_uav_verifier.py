@@ -44,7 +44,7 @@ from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     detection_truth)
 from multi_target_tracker.box_regression import member_features  # noqa: E402
 from multi_target_tracker.detector import (  # noqa: E402
-    MODELS_DIR, Detector, group_members, members_stats, suppress_contained)
+    MODELS_DIR, Detector, members_stats, suppress_contained)
 from multi_target_tracker.verifier import features, fit_tree_verifier, fit_verifier  # noqa: E402
 from scipy.special import expit  # noqa: E402
 
@@ -94,7 +94,7 @@ def samples(det: Detector, seeds, min_windows: int, refined: bool = False) -> tu
     rows, labels = [], []
     for seed, difficulty in seeds:
         for bgr, truth, ignore in scene_frames(seed, difficulty, 8):
-            members = group_members(*det.raw(bgr), cfg.group_iou)
+            members = det.members(det.raw(bgr))
             kept, group_boxes, counts, sums, best = members_stats(*members, cfg.window_margin, min_windows)
             if not len(group_boxes):
                 continue
@@ -128,8 +128,8 @@ def swept_point(det: Detector, seeds, min_neighbors: list[int], max_false_alarms
     best = None
     for n in min_neighbors:
         det.config = dataclasses.replace(cfg, min_neighbors=n)
-        candidates = [(det.candidates(bgr, boxes, margins, cfg.window_margin), truth, ignore)
-                      for bgr, truth, ignore, (boxes, margins) in frames]
+        candidates = [(det.candidates(bgr, windows, cfg.window_margin), truth, ignore)
+                      for bgr, truth, ignore, windows in frames]
         for threshold in thresholds:
             acc = DetectionAccumulator()
             for (group_boxes, logit), truth, ignore in candidates:
@@ -155,8 +155,8 @@ def operating_point(det: Detector, seeds, min_neighbors: list[int]) -> dict:
     for n in min_neighbors:
         det.config = dataclasses.replace(cfg, min_neighbors=n)
         acc = DetectionAccumulator()
-        for bgr, truth, ignore, (boxes, margins) in frames:
-            group_boxes, probability = det.verified(bgr, boxes, margins, cfg.window_margin)
+        for bgr, truth, ignore, windows in frames:
+            group_boxes, probability = det.verified(bgr, windows, cfg.window_margin)
             acc.add_frame(scale_boxes(group_boxes, cfg.box_scale), probability, truth, ignore)
         s = acc.summary()
         recall, precision, score = (np.asarray(s[key]) for key in ("pr_recall", "pr_precision", "pr_score"))
