@@ -234,3 +234,4 @@ def test_raw_windows_carry_their_turned_rectangles():
     edge = windows.quads[:, 1] - windows.quads[:, 0]
     angle = np.degrees(np.arctan2(edge[:, 1], edge[:, 0])) % 90
     assert ((angle > 40) & (angle < 50)).sum() > 0.2 * len(angle)               # the 45-degree views' windows
+    assert detector.config.group_shape == "turned"

@@ -17,7 +17,7 @@ from aircraft_docking_tracker.object_table import LOW_CONFIDENCE, confident_rows
 from aircraft_docking_tracker.offline import build_processor
 from aircraft_docking_tracker.scenarios.uav import (
     UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_MEMBER_BOXES as MEMBER_BOXES,
-    UAV_UPRIGHT as UPRIGHT,
+    UAV_UPRIGHT as UPRIGHT, UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS,
     UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
 from multi_target_tracker.cascade import Cascade
@@ -171,17 +171,42 @@ def test_the_image_stages_cut_the_false_alarms_on_held_out_scenes(detector, coun
 def test_the_colour_blobs_views_find_more_vehicles_on_held_out_scenes(detector, counts_of):
     """Side by side on the same held-out scenes: the windows of each colour blob's own view (issue 12 session 33)
     give groups on vehicles the fixed-heading scan gathers too few windows on, with the turned views cropped to pay
-    for them (measured on these four scenes 137 of 192 vehicles in 153 detections, false alarms 0.105, against 128
-    in 142, 0.099; with the whole turned canvases 138 in 149; bench/uav_tracking.py's 12 held-out scenes: see
-    docs/uav_camera.md)."""
-    before = Detector(dataclasses.replace(detector.config, **BEFORE_BLOBS))
-    assert detector.config.blob_views and not before.config.blob_views
+    for them. Measured with the windows grouped by their upright boxes, the grouping then (on these four scenes 137
+    of 192 vehicles in 153 detections, false alarms 0.105, against 128 in 142, 0.099; with the whole turned canvases
+    138 in 149; bench/uav_tracking.py's 12 held-out scenes: see docs/uav_camera.md). Grouped by the windows' turned
+    rectangles (session 39, the set-up's) the scan without the blobs finds as many here (137 against the set-up's
+    138): that grouping parts the neighbours the blobs' views had found for it. Across the tuning scenes the blobs
+    still carry the set-up's MOTA (0.631 against 0.587 without them, 7 of 8 seeds; docs/uav_camera.md), so here they
+    need only find as many within noise."""
+    assert detector.config.blob_views and detector.config.group_shape == "turned"
+    upright = Detector(dataclasses.replace(detector.config, **UPRIGHT_GROUPS))
+    for with_blobs, grouped_as_then in ((detector, False), (upright, True)):
+        before = Detector(dataclasses.replace(detector.config, **{**BEFORE_BLOBS,
+                                                                  "group_shape": with_blobs.config.group_shape}))
+        assert not before.config.blob_views and before.config.group_shape == with_blobs.config.group_shape
+        vehicles, detections, true = counts_of(with_blobs).sum(axis=0)
+        b_vehicles, b_detections, b_true = counts_of(before).sum(axis=0)
+        assert vehicles == b_vehicles
+        gain = 0.025 if grouped_as_then else -0.02
+        assert true >= b_true + gain * vehicles, (with_blobs.config.group_shape, true, b_true, vehicles)
+        assert 1 - true / max(detections, 1) <= 1 - b_true / max(b_detections, 1) + 0.03, (
+            with_blobs.config.group_shape, true, detections, b_true, b_detections)
+
+
+def test_grouping_by_turned_rectangles_keeps_the_detections_on_held_out_scenes(detector, counts_of):
+    """Side by side on the same held-out scenes: the windows grouped by their own turned rectangles (the set-up's,
+    session 39) against their upright boxes. On bench/uav_tracking.py's 12 held-out scenes it lifts MOTA (0.531
+    against 0.512, 8 scenes better, 3 worse); on these four the detector alone moves by a vehicle or two (measured
+    138 of 192 vehicles in 149 detections, false alarms 0.074, against 137 in 153, 0.105), so this checks that it
+    finds as many vehicles within noise at no more false alarms."""
+    upright = Detector(dataclasses.replace(detector.config, **UPRIGHT_GROUPS))
+    assert detector.config.group_shape == "turned" and upright.config.group_shape == "upright"
     vehicles, detections, true = counts_of(detector).sum(axis=0)
-    b_vehicles, b_detections, b_true = counts_of(before).sum(axis=0)
-    assert vehicles == b_vehicles
-    assert true >= b_true + 0.025 * vehicles, (true, b_true, vehicles)
-    assert 1 - true / max(detections, 1) <= 1 - b_true / max(b_detections, 1) + 0.03, (true, detections, b_true,
-                                                                                      b_detections)
+    u_vehicles, u_detections, u_true = counts_of(upright).sum(axis=0)
+    assert vehicles == u_vehicles
+    assert true >= u_true - 0.02 * vehicles, (true, u_true, vehicles)
+    assert 1 - true / max(detections, 1) <= 1 - u_true / max(u_detections, 1) + 0.02, (true, detections, u_true,
+                                                                                     u_detections)
 
 
 def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_unchanged(detector, held_out_frames):

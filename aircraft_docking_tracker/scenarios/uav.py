@@ -47,10 +47,12 @@ UAV_EVAL_SEEDS = range(3000, 4000)
 
 # Earlier UAV camera set-ups, as overrides of config/uav_camera.yaml's detector: bench/uav_detector.py measures
 # them beside the set-up and test/test_detector_uav_setup.py checks that the set-up still beats each.
-# the set-up before the colour verifier: the cascade's window count alone, its operating point (tuning seeds)
+# the set-up before session 39 (issue 12): windows grouped by their upright boxes; every earlier set-up below too
+UAV_UPRIGHT_GROUPS = {"group_shape": "upright"}
 # the set-up before the colour blobs' views (issue 12 session 33): the scan's windows alone, the turned views' whole
 # canvases, the pyramid step it had then; every earlier set-up below also scanned so
-UAV_BEFORE_BLOBS = {"blob_views": False, "turned_crop": 0.0, "scale_factor": 1.2}
+UAV_BEFORE_BLOBS = {**UAV_UPRIGHT_GROUPS, "blob_views": False, "turned_crop": 0.0, "scale_factor": 1.2}
+# the set-up before the colour verifier: the cascade's window count alone, its operating point (tuning seeds)
 UAV_CASCADE_ONLY = {**UAV_BEFORE_BLOBS, "verifier": "", "box_regressor": "", "low_confidence_band": 0.0, "min_neighbors": 8,
                     "containment": 0.4, "box_scale": 0.9}
 # the set-up before the box regressor (session 8): the verifier on the groups' mean boxes, its operating point
