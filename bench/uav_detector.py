@@ -26,6 +26,7 @@
   detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
   side by side in this run: the set-up (its size range from the known altitude) against the same set-up without
+  its windows grouped by their upright boxes (``UPRIGHT_GROUPS``, the set-up before session 39), without
   the colour blobs' views (``BEFORE_BLOBS``, the set-up before them), the same
   model scanning every window size that fits the frame, the same cascade without the colour verifier
   (``CASCADE_ONLY``, the set-up before it), the previous heading-aligned set-up (``PREVIOUS``),
@@ -64,6 +65,7 @@ from aircraft_docking_tracker.object_table import confident_rows  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_UPRIGHT as UPRIGHT,
+    UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
     UavSceneConfig, detection_truth)
 from multi_target_tracker.detector import Detector, DetectorConfig, group_stats, suppress_contained  # noqa: E402
@@ -78,7 +80,7 @@ FORMER = {"model": "uav_vehicles_fused.json", "window_margin": 1.5, "min_neighbo
 # and transposed only; its operating point as it was chosen on the tuning seeds
 # the previous heading-aligned set-up (model uav_vehicles_heading.json: positives jittered for a stride-4 scan,
 # negatives mined in the upright and transposed views only; its operating point as chosen on the tuning seeds)
-PREVIOUS = {"verifier": "", "box_regressor": "", "low_confidence_band": 0.0, "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
+PREVIOUS = {**UPRIGHT_GROUPS, "verifier": "", "box_regressor": "", "low_confidence_band": 0.0, "model": "uav_vehicles_heading.json", "angles": [0.0, 45.0], "min_size": 25.0, "max_size": 106.0,
             "stride": 8, "min_neighbors": 8, "window_margin": 1.0, "group_iou": 0.3, "containment": 0.4,
             "box_scale": 0.9}
 HEIGHTS = (1.0, 2.0, 2.5, 3.0, 4.0)
@@ -302,6 +304,7 @@ def main() -> int:
     upright = Detector(DetectorConfig(**UPRIGHT))
     previous = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **PREVIOUS}))
     before_blobs = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **BEFORE_BLOBS}))
+    upright_groups = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **UPRIGHT_GROUPS}))
     cascade_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **CASCADE_ONLY}))
     verifier_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **VERIFIER_ONLY}))
     logistic = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **LOGISTIC}))
@@ -310,7 +313,7 @@ def main() -> int:
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
-               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "before_blobs": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
+               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "upright_groups": [], "before_blobs": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
                "other_seed_model": args.other_seed_model}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
@@ -322,6 +325,7 @@ def main() -> int:
         results["seeds"].append({"seed": seed, "difficulty": difficulty})
         results["setup_results"].append(run(det, items))
         results["full_pyramid"].append(run(full, items[::4]))      # speed and false alarms without the size prior
+        results["upright_groups"].append(run(upright_groups, items))
         results["before_blobs"].append(run(before_blobs, items))
         results["cascade_only"].append(run(cascade_only, items))
         results["verifier_only"].append(run(verifier_only, items))
@@ -335,7 +339,7 @@ def main() -> int:
         r = results["setup_results"][-1]
         print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
               f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
-    for key in ("setup_results", "full_pyramid", "before_blobs", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
+    for key in ("setup_results", "full_pyramid", "upright_groups", "before_blobs", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
         if results[key]:
             results[key + "_summary"] = spread(results[key])
     # group confidences of the verifier's groups as they were compared (mean boxes, box_scale 0.9)
@@ -391,6 +395,8 @@ def markdown(results: dict) -> str:
              line("same model, every window size (no altitude prior; every 4th frame)", full),
              *([line(f"same recipe, another training seed ({Path(results['other_seed_model']).name})",
                      results["other_seed_summary"])] if "other_seed_summary" in results else []),
+             *([line("windows grouped by their upright boxes (the set-up before session 39)",
+                     results["upright_groups_summary"])] if "upright_groups_summary" in results else []),
              *([line("without the colour blobs' views (the scan's windows alone: the set-up before session 33)",
                      results["before_blobs_summary"])] if "before_blobs_summary" in results else []),
              line("logistic colour verifier (mean box's colour, threshold 1.217) with the box regressor: the set-up "
