@@ -408,7 +408,7 @@ def markdown(results: dict) -> str:
              line("previous set-up: uav_vehicles_heading.json (stride-4 jitter, upright-view mining), its operating "
                   "point", previous),
              line("previous set-up: upright 3:2 model uav_vehicles_low.json, 0/90 degrees only", upright),
-             line(f"former set-up (default altitude, 21x14 model, windows from 14 px; every 2nd frame)", former),
+             line("former set-up (default altitude, 21x14 model, windows from 14 px; every 2nd frame)", former),
              "", "Group confidence (threshold chosen on the 18 tuning seeds, best detection minus false alarms pooled, "
              "then applied to the evaluation seeds above; AP and detection at a false-alarm cap from the evaluation "
              "seeds' own PR curve):", "",
