@@ -440,37 +440,6 @@ def _suppress_contained(boxes, order, containment, limit):
 
 
 @numba.njit(cache=True, nogil=True)
-def _group_labels(boxes, group_iou):
-    """Group label of every window (boxes sorted best margin first) and each group's seed window.
-
-    Window ``s`` still free seeds a group that takes every later free window overlapping it by
-    ``group_iou`` (IoU as ``box_iou``: 0 for empty boxes); earlier windows are all taken by then.
-    """
-    n = len(boxes)
-    label = np.full(n, -1, np.int64)
-    seeds = np.empty(n, np.int64)
-    groups = 0
-    for s in range(n):
-        if label[s] >= 0:
-            continue
-        label[s] = groups
-        seeds[groups] = s
-        ax, ay, aw, ah = boxes[s, 0], boxes[s, 1], boxes[s, 2], boxes[s, 3]
-        area_a = max(aw, 0.0) * max(ah, 0.0)
-        for j in range(s + 1, n):
-            if label[j] >= 0:
-                continue
-            bx, by, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
-            inter = max(min(ax + aw, bx + bw) - max(ax, bx), 0.0) * max(min(ay + ah, by + bh) - max(ay, by), 0.0)
-            union = area_a + max(bw, 0.0) * max(bh, 0.0) - inter
-            iou = inter / union if union > 0.0 else 0.0
-            if iou >= group_iou:
-                label[j] = groups
-        groups += 1
-    return label, seeds[:groups]
-
-
-@numba.njit(cache=True, nogil=True)
 def _polygon_area(xs, ys, n):
     """Area of the polygon ``xs[:n], ys[:n]`` (shoelace; either vertex order)."""
     total = 0.0
@@ -517,31 +486,45 @@ def quad_intersection(a, b):
 
 
 @numba.njit(cache=True, nogil=True)
-def _group_labels_turned(boxes, quads, group_iou):
-    """:func:`_group_labels` by the IoU of the windows' turned rectangles ``quads`` ``(n, 4, 2)``; their upright
-    ``boxes`` first rule out the pairs that cannot overlap."""
+def _window_iou(boxes, quads, areas, s, j):
+    """IoU of windows ``s`` and ``j``: of their upright ``boxes`` (as ``box_iou``: 0 for empty boxes) when ``quads``
+    is empty, else of their turned rectangles ``quads`` (``areas`` theirs), the boxes ruling out at once the pairs
+    that cannot overlap."""
+    ax, ay, aw, ah = boxes[s, 0], boxes[s, 1], boxes[s, 2], boxes[s, 3]
+    bx, by, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
+    if len(quads) == 0:
+        inter = max(min(ax + aw, bx + bw) - max(ax, bx), 0.0) * max(min(ay + ah, by + bh) - max(ay, by), 0.0)
+        union = max(aw, 0.0) * max(ah, 0.0) + max(bw, 0.0) * max(bh, 0.0) - inter
+        return inter / union if union > 0.0 else 0.0
+    if min(ax + aw, bx + bw) <= max(ax, bx) or min(ay + ah, by + bh) <= max(ay, by):
+        return 0.0
+    inter = quad_intersection(quads[s], quads[j])
+    union = areas[s] + areas[j] - inter
+    return inter / union if union > 0.0 else 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _group_labels(boxes, quads, group_iou):
+    """Group label of every window (sorted best margin first) and each group's seed window.
+
+    Window ``s`` still free seeds a group that takes every later free window overlapping it by ``group_iou``
+    (:func:`_window_iou`: the upright ``boxes``, or the turned rectangles ``quads`` unless empty); earlier windows
+    are all taken by then.
+    """
     n = len(boxes)
     label = np.full(n, -1, np.int64)
     seeds = np.empty(n, np.int64)
-    area = np.empty(n)
-    for i in range(n):
-        area[i] = _polygon_area(quads[i, :, 0], quads[i, :, 1], 4)
+    areas = np.empty(len(quads))
+    for i in range(len(quads)):
+        areas[i] = _polygon_area(quads[i, :, 0], quads[i, :, 1], 4)
     groups = 0
     for s in range(n):
         if label[s] >= 0:
             continue
         label[s] = groups
         seeds[groups] = s
-        ax, ay, aw, ah = boxes[s, 0], boxes[s, 1], boxes[s, 2], boxes[s, 3]
         for j in range(s + 1, n):
-            if label[j] >= 0:
-                continue
-            bx, by, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
-            if min(ax + aw, bx + bw) <= max(ax, bx) or min(ay + ah, by + bh) <= max(ay, by):
-                continue
-            inter = quad_intersection(quads[s], quads[j])
-            union = area[s] + area[j] - inter
-            if union > 0.0 and inter / union >= group_iou:
+            if label[j] < 0 and _window_iou(boxes, quads, areas, s, j) >= group_iou:
                 label[j] = groups
         groups += 1
     return label, seeds[:groups]
@@ -559,12 +542,13 @@ def group_members(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
     if len(boxes) == 0:
         return boxes, margins, np.zeros(0, np.int64), np.zeros(0, np.int64)
     if quads is None:
-        label, seeds = _group_labels(boxes, float(group_iou))
+        quads = np.zeros((0, 4, 2))
     else:
         quads = np.asarray(quads, np.float64).reshape(-1, 4, 2)
         if len(quads) != len(order):
             raise ValueError(f"{len(quads)} turned windows for {len(order)} boxes")
-        label, seeds = _group_labels_turned(boxes, np.ascontiguousarray(quads[order]), float(group_iou))
+        quads = np.ascontiguousarray(quads[order])
+    label, seeds = _group_labels(boxes, quads, float(group_iou))
     return boxes, margins, label, seeds
 
 
