@@ -25,7 +25,7 @@
   minus false alarms, pooled) and applied unchanged to the evaluation seeds; also each one's AP and its
   detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
-  side by side in this run: the set-up (its size range from the known altitude) against the same set-up without
+  side by side in this run: the set-up (its size range from the known altitude) against the same set-up with
   its windows grouped by their upright boxes (``UPRIGHT_GROUPS``, the set-up before session 39), without
   the colour blobs' views (``BEFORE_BLOBS``, the set-up before them), the same
   model scanning every window size that fits the frame, the same cascade without the colour verifier
