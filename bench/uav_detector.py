@@ -68,7 +68,7 @@ from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
     UavSceneConfig, detection_truth)
-from multi_target_tracker.detector import Detector, DetectorConfig, group_stats, suppress_contained  # noqa: E402
+from multi_target_tracker.detector import Detector, DetectorConfig, members_stats, suppress_contained  # noqa: E402
 from multi_target_tracker.verifier import features  # noqa: E402
 from multi_target_tracker.train_cascade import truncated  # noqa: E402
 
@@ -155,10 +155,8 @@ def group_confidences(det: Detector, image: np.ndarray) -> tuple[np.ndarray, dic
     """The set-up's groups of one frame (every group of at least ``VERIFIER_MIN_WINDOWS`` windows; boxes as
     ``detect`` scales them) and each confidence of :data:`CONFIDENCES` per group."""
     cfg = det.config
-    windows = det.raw(image)
-    group_boxes, counts, margin_sums, best = group_stats(windows.boxes, windows.margins, cfg.group_iou,
-                                                         cfg.window_margin, VERIFIER_MIN_WINDOWS,
-                                                         det.group_quads(windows))
+    group_boxes, counts, margin_sums, best = members_stats(*det.members(det.raw(image)), cfg.window_margin,
+                                                           VERIFIER_MIN_WINDOWS)[1:]
     confidences = {"count": counts + expit(best), "margin_sum": margin_sums, "best_margin": best}
     if det.verifier is not None:
         confidences["verifier"] = det.verifier.logit(features(image, group_boxes, counts, margin_sums, best))
@@ -255,8 +253,7 @@ def miss_breakdown(detectors: dict, seeds: list[tuple[int, int]]) -> dict:
                 boxes = scale_boxes(boxes, cfg.box_scale) if len(boxes) else boxes
                 final, scores = det.verified(image, raw, cfg.window_margin)
                 final = scale_boxes(final, cfg.box_scale) if len(final) else final
-                small = scale_boxes(group_stats(raw.boxes, raw.margins, cfg.group_iou, cfg.window_margin,
-                                                quads=det.group_quads(raw))[0], cfg.box_scale)
+                small = scale_boxes(members_stats(*det.members(raw), cfg.window_margin)[1], cfg.box_scale)
                 matched, _ = match_frame(final, scores, truth, 0.5, ignore)
                 iou_det, iou_group, iou_small = (box_iou(b[:, None], truth[None]) if len(b) and len(truth)
                                                  else np.zeros((len(b), len(truth))) for b in (final, boxes, small))

@@ -628,14 +628,14 @@ class Detector:
         orientations if configured, and the windows of the colour blobs' views with ``blob_views``."""
         return self._raw(image, to_gray(image), last_stage_margin)
 
-    def group_quads(self, windows: Windows) -> np.ndarray | None:
+    def _group_quads(self, windows: Windows) -> np.ndarray | None:
         """What the grouping overlaps besides the boxes: the windows' turned rectangles with ``group_shape``
         turned, else None (the grouping functions' ``quads``)."""
         return windows.quads if self.config.group_shape == "turned" else None
 
     def members(self, windows: Windows):
         """:func:`group_members` of ``windows`` as this detector groups them (``group_iou``, ``group_shape``)."""
-        return group_members(windows.boxes, windows.margins, self.config.group_iou, self.group_quads(windows))
+        return group_members(windows.boxes, windows.margins, self.config.group_iou, self._group_quads(windows))
 
     def _raw(self, image: np.ndarray, gray: np.ndarray, last_stage_margin: float | None) -> Windows:
         """:meth:`raw` of ``image`` whose grey version ``gray`` the caller has already."""
@@ -708,7 +708,7 @@ class Detector:
                                             cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.cascade is not None:
             boxes, scores = group_windows(boxes, scores, cfg.group_iou, cfg.min_neighbors, cfg.containment,
-                                          cfg.max_detections, self.group_quads(windows))
+                                          cfg.max_detections, self._group_quads(windows))
         else:  # OpenCV grouped already (minNeighbors); the two orientations only need merging
             keep = suppress_contained(boxes, scores, cfg.containment, cfg.max_detections)
             boxes, scores = boxes[keep], scores[keep]
