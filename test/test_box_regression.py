@@ -12,10 +12,31 @@ from aircraft_docking_tracker.geometry import box_iou, box_to_quad
 from conftest import require_data
 from multi_target_tracker.box_regression import (
     FEATURES, BoxRegressor, BoxRegressorError, ImageStage, apply_offsets, edge_offsets, fit_box_regressor,
-    fit_image_stage, image_feature_names, image_features, image_stage_features, member_features)
+    column_medians, fit_image_stage, image_feature_names, image_features, image_stage_features, member_features,
+    percentile)
 from multi_target_tracker.detector import MODELS_DIR, Detector, DetectorConfig, Windows, group_members, members_stats
 from multi_target_tracker.train_cascade import read_yolo_folder, truncated
 from multi_target_tracker.verifier import FEATURES as VERIFIER_FEATURES, Verifier
+
+
+def test_percentile_and_column_medians_give_numpys_bits():
+    """The regressor's features were measured with np.percentile / np.median: the fast versions must give the same
+    bits and dtype (float64 member edges, float32 image profiles), ties and the 0 / 100 ends included."""
+    rng = np.random.default_rng(0)
+    for trial in range(800):
+        dtype = (np.float32, np.float64)[trial % 2]
+        values = (rng.normal(size=int(rng.integers(1, 50))) * 10 ** rng.uniform(-3, 3)).astype(dtype)
+        if trial % 3 == 0:
+            values = np.round(values)
+        for q in (0, 5, 10, 20, 50, 90, 95, 100, float(rng.uniform(0, 100))):
+            ours, numpys = percentile(values, q), np.percentile(values, q)
+            assert ours == numpys and ours.dtype == numpys.dtype, (values, q)
+        table = rng.normal(size=(int(rng.integers(1, 40)), 3)).astype(dtype)
+        medians = column_medians(table)
+        assert np.array_equal(medians, np.median(table, axis=0)) and medians.dtype == dtype
+    assert np.isnan(percentile(np.array([1.0, np.nan, 2.0]), 50))
+    with pytest.raises(BoxRegressorError):
+        percentile(np.zeros(0), 10)
 
 
 def test_edge_offsets_and_apply_offsets_are_inverse():
