@@ -373,7 +373,7 @@ def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4
     idx, score = (scan.evaluate(cascade.packed(), last_stage_margin) if scan.n_windows
                   else (np.zeros(0, np.int64), np.zeros(0)))
     fx, fy = width / max(level[0], 1), height / max(level[1], 1)
-    origin = scan.window_origins()[idx] if len(idx) else np.zeros((0, 2))
+    origin = scan.window_origins(idx)
     boxes = np.column_stack([origin[:, 0] * fx, origin[:, 1] * fy,
                              np.full(len(idx), LBP_SIZE * fx), np.full(len(idx), LBP_SIZE * fy)]).reshape(-1, 4)
     if select is not None and len(idx):

@@ -236,10 +236,11 @@ class LevelScan:
     def n_windows(self) -> int:
         return self.rows * self.cols
 
-    def window_origins(self) -> np.ndarray:
-        """``(n, 2)`` top-left (x, y) of every window in texture-level pixels, row-major."""
-        r, c = np.divmod(np.arange(self.n_windows), self.cols)
-        return np.stack([c * self.stride + 1, r * self.stride + 1], axis=1)
+    def window_origins(self, windows: np.ndarray | None = None) -> np.ndarray:
+        """``(n, 2)`` top-left (x, y) in texture-level pixels of the ``windows`` (flat indices; all of them, row-major,
+        by default)."""
+        r, c = np.divmod(np.arange(self.n_windows) if windows is None else np.asarray(windows), self.cols)
+        return np.stack([c * self.stride + 1, r * self.stride + 1], axis=1).reshape(-1, 2)
 
     # --- texture: cell histograms -> block histograms -> per-window maximum (eq. 3)
     def _texture(self, gray_l: np.ndarray) -> None:
