@@ -64,9 +64,12 @@ def test_level_scan_equals_reference_window_by_window(stride):
     gc = cv2.resize(frame, (2 * level[0], 2 * level[1]), interpolation=cv2.INTER_AREA)
     windows = rng.choice(scan.n_windows, 25, replace=False)
     vectors = scan.vectors(windows)
-    for w, vec in zip(windows, vectors):
+    origins = scan.window_origins(windows)           # the windows' top-left pixels: code position + 1
+    assert np.array_equal(origins, scan.window_origins()[windows]) and scan.window_origins([]).shape == (0, 2)
+    for w, vec, origin in zip(windows, vectors, origins):
         y, x = divmod(int(w), scan.cols)
         y, x = y * stride, x * stride
+        assert tuple(origin) == (x + 1, y + 1)
         ref = F.window_features(gl[y:y + 34, x:x + 34], gc[2 * y + 1:2 * y + 67, 2 * x + 1:2 * x + 67], 12.0)
         assert np.array_equal(F.quantised(ref), vec)
     # the compiled cascade loop over the level's tables = the cascade on the reference vectors
