@@ -239,7 +239,8 @@ class LevelScan:
     def window_origins(self, windows: np.ndarray | None = None) -> np.ndarray:
         """``(n, 2)`` top-left (x, y) in texture-level pixels of the ``windows`` (flat indices; all of them, row-major,
         by default)."""
-        r, c = np.divmod(np.arange(self.n_windows) if windows is None else np.asarray(windows), self.cols)
+        flat = np.arange(self.n_windows) if windows is None else np.asarray(windows, np.int64)
+        r, c = np.divmod(flat, self.cols)
         return np.stack([c * self.stride + 1, r * self.stride + 1], axis=1).reshape(-1, 2)
 
     # --- texture: cell histograms -> block histograms -> per-window maximum (eq. 3)

@@ -65,7 +65,8 @@ def test_level_scan_equals_reference_window_by_window(stride):
     windows = rng.choice(scan.n_windows, 25, replace=False)
     vectors = scan.vectors(windows)
     origins = scan.window_origins(windows)           # the windows' top-left pixels: code position + 1
-    assert np.array_equal(origins, scan.window_origins()[windows]) and scan.window_origins([]).shape == (0, 2)
+    assert np.array_equal(origins, scan.window_origins()[windows])
+    assert scan.window_origins([]).shape == (0, 2) and scan.window_origins([]).dtype == origins.dtype
     for w, vec, origin in zip(windows, vectors, origins):
         y, x = divmod(int(w), scan.cols)
         y, x = y * stride, x * stride
