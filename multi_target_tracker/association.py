@@ -588,12 +588,36 @@ class MultiTargetTracker:
     def tracks(self) -> Tracks:
         """Every track's box and state; with ``frame_width`` and ``frame_height`` the boxes cut to the image
         (the filters keep the whole predicted box) and published targets wholly outside it unpublished (4)."""
-        boxes, states = self.bank.boxes(), self.states.copy()
+        return self._read_out(self.bank, self.states.copy())
+
+    def predicted(self, stamp: float) -> Tracks | None:
+        """The tracks at ``stamp``, a frame after the last :meth:`step` that has no detections of its own (the
+        detector skipped it), without changing anything: every filter predicted over ``T = stamp - last stamp``
+        (eq. 6). A published target is coasting (2) there while its predicted position is trusted
+        (``coast_output_std``), else unpublished (4); its missed counter stays (nobody looked at that frame).
+        None when no frame was stepped yet or :meth:`step` at ``stamp`` would reset (stamp not after the last
+        one, or more than ``max_frame_gap`` after it)."""
+        if stamp != stamp or stamp in (float("inf"), float("-inf")):
+            raise AssociationError(f"stamp {stamp} is not a finite number of seconds")
+        if self.last_stamp is None or not 0 < stamp - self.last_stamp <= self.config.max_frame_gap:
+            return None
+        bank = KalmanBank(self.kalman_config)
+        bank.x, bank.cov, bank.size = self.bank.x.copy(), self.bank.cov.copy(), self.bank.size.copy()
+        bank.predict(stamp - self.last_stamp)
+        states = self.states.copy()
+        published = np.isin(states, (CONFIRMED, COASTING))
+        trusted = np.sqrt(bank.cov[:, 0]) <= self.config.coast_output_std * bank.size[:, 1]
+        states[published] = np.where(trusted[published], COASTING, PREDICTED)
+        return self._read_out(bank, states)
+
+    def _read_out(self, bank: KalmanBank, states: np.ndarray) -> Tracks:
+        """:class:`Tracks` of ``bank``'s filters (this tracker's or a predicted copy) with ``states``."""
+        boxes = bank.boxes()
         cfg = self.config
         if cfg.frame_width > 0 and cfg.frame_height > 0 and len(boxes):
             boxes, inside = clip_to_frame(boxes, cfg.frame_width, cfg.frame_height)
             states[~inside & np.isin(states, (CONFIRMED, COASTING))] = PREDICTED
-        return Tracks(self.ids.copy(), boxes, self.bank.velocities.copy(), self.scores.copy(),
+        return Tracks(self.ids.copy(), boxes, bank.velocities.copy(), self.scores.copy(),
                       self.class_ids.copy(), self.ages.copy(), self.hits.copy(), self.misses.copy(), states)
 
     def trail(self, track_id: int) -> np.ndarray:

@@ -418,3 +418,38 @@ def test_second_pass_iou_gate_refuses_a_low_confidence_detection_off_the_track()
 def test_low_confidence_flags_must_match_the_boxes():
     with pytest.raises(AssociationError):
         MultiTargetTracker().step(0.0, np.array([box(5, 5)]), low=[True, False])
+
+
+def test_predicted_tracks_at_a_skipped_frame_change_nothing_and_follow_eq_6():
+    """A frame the detector skipped: every filter predicted to its stamp, states published -> coasting, and the
+    tracker exactly as before (the next step gives the same tracks as a tracker never asked)."""
+    frames = [[box(50 + 4 * k, 50, 40, 40), box(150, 80 + 3 * k, 40, 40)] for k in range(6)]
+    asked, plain = MultiTargetTracker(kalman=KALMAN), MultiTargetTracker(kalman=KALMAN)
+    assert asked.predicted(0.0) is None                                   # nothing stepped yet
+    run(asked, frames[:5])
+    run(plain, frames[:5])
+    now = asked.tracks()
+    between = asked.predicted(4.5 / FPS)
+    T = 0.5 / FPS
+    np.testing.assert_allclose(between.boxes[:, :2], now.boxes[:, :2] + T * now.velocities)   # x <- x + T v
+    np.testing.assert_allclose(between.boxes[:, 2:], now.boxes[:, 2:])
+    assert (now.states == CONFIRMED).all() and (between.states == COASTING).all()
+    assert (between.misses == now.misses).all() and (between.ids == now.ids).all()
+    assert asked.predicted(4.0 / FPS) is None and asked.predicted(4.0 / FPS + 10.0) is None   # not after / a reset
+    with pytest.raises(AssociationError):
+        asked.predicted(float("nan"))
+    after, expected = asked.step(5 / FPS, np.array(frames[5])), plain.step(5 / FPS, np.array(frames[5]))
+    for name in ("ids", "boxes", "velocities", "states", "misses"):
+        np.testing.assert_array_equal(getattr(after.tracks, name), getattr(expected.tracks, name))
+    np.testing.assert_array_equal(asked.bank.cov, plain.bank.cov)
+
+
+def test_predicted_tracks_unpublish_an_untrusted_prediction():
+    """coast_output_std applies to the predicted position: a target whose position std would exceed it at the
+    skipped frame is not published there (state 4); tentative targets stay tentative."""
+    cfg = AssociationConfig(coast_output_std=0.1, confirm_first_frame=False, confirm_length=2)
+    tracker = MultiTargetTracker(cfg, KALMAN)
+    run(tracker, [[box(50 + 4 * k, 50, 40, 40)] for k in range(3)] + [[box(62, 50, 40, 40), box(300, 300, 40, 40)]])
+    near, far = tracker.predicted(3.2 / FPS), tracker.predicted(3 / FPS + 2.0)
+    assert near.states.tolist() == [COASTING, TENTATIVE]
+    assert far.states.tolist() == [PREDICTED, TENTATIVE]                  # 2 s on: std grew past 0.1 box heights
