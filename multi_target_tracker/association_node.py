@@ -3,7 +3,7 @@
 Topics (relative names):
 
 * in ``detections`` (``sensor_msgs/PointCloud2``, ``DETECTION_DTYPE`` rows);
-* in ``image`` (``sensor_msgs/Image``), only with ``output.annotate_image``;
+* in ``image`` (``sensor_msgs/Image``), only with ``output.annotate_image`` or ``output.fill_skipped_frames``;
 * out ``tracks`` (``PointCloud2``, ``TRACK_DTYPE`` rows, velocities in px/s): every track the core
   holds, with its ``state``: 0 tentative, 1 confirmed (detected in this frame), 2 coasting and
   published (its prediction still trusted), 3 lost (kept for re-acquisition), 4 coasting unpublished
@@ -16,8 +16,14 @@ Topics (relative names):
 * out ``tracks/image`` (``sensor_msgs/Image`` bgr8, the image with the tracks drawn), only with
   ``output.annotate_image``.
 
-Every output carries the header of the detections message (the image's stamp and frame_id). The
-frame interval T of the filters comes from those stamps. Invalid detection rows (NaN, inf,
+With ``output.fill_skipped_frames`` every camera frame gets its tracks: a frame the detector skipped (its
+keep-newest input drops the frames it cannot keep up with) gets the tracks predicted to its stamp (eq. 6,
+published targets coasting, state 2), published just before the tracks of the next detections, so a
+display or a consumer of ``tracks`` sees the camera's rate however slow the detector is.
+
+Every output carries the header of the detections message (the image's stamp and frame_id; a skipped
+frame's outputs, the image's own). The frame interval T of the filters comes from those stamps. Invalid
+detection rows (NaN, inf,
 size <= 0) are dropped, counted and reported in ``/diagnostics``; stamps going backwards (a looped
 bag) or jumping reset the tracks; new IDs keep counting up.
 """
@@ -55,6 +61,10 @@ class AssociationOutputConfig:
     trail_length: int = param(20, "trail points per track in tracks/markers", low=0, high=1000)
     annotate_image: bool = param(False, "subscribe to image and publish tracks/image with the tracks drawn "
                                  "(start-up only)", read_only=True)
+    fill_skipped_frames: bool = param(False, "subscribe to image and publish tracks for every camera frame, also "
+                                      "those the detector skipped (its keep-newest input drops frames it cannot "
+                                      "keep up with): the tracks predicted at that frame's stamp (state 2), "
+                                      "published when the next detections arrive (start-up only)", read_only=True)
 
 
 @dataclass
@@ -108,18 +118,23 @@ class AssociationProcessor(MessageProcessor):
                         "tracks/markers": "visualization_msgs/msg/MarkerArray",
                         "tracks/image_markers": "visualization_msgs/msg/ImageMarker"}
         self.latest_only = frozenset()
-        if self.output.annotate_image:
+        if self.output.annotate_image or self.output.fill_skipped_frames:
             self.inputs["image"] = "sensor_msgs/msg/Image"
-            self.outputs["tracks/image"] = "sensor_msgs/msg/Image"
             self.latest_only = frozenset({"image"})
+        if self.output.annotate_image:
+            self.outputs["tracks/image"] = "sensor_msgs/msg/Image"
         self._images: OrderedDict[int, object] = OrderedDict()   # stamp -> image waiting for its tracks
         self._tables: OrderedDict[int, np.ndarray] = OrderedDict()  # stamp -> tracks waiting for the image
+        self._frames: OrderedDict[int, object] = OrderedDict()   # stamp -> header of a frame not yet tracked
+        self._last_detections: int | None = None                 # stamp of the last detections tracked
+        self.filled_frames = 0
         self._shown = 0
 
     def process(self, topic, msg):
         if topic == "image":
             return self._image(msg)
         stamp = stamp_to_ns(msg.header.stamp)
+        out = self._fill_skipped(stamp)
         flagged = any(f.name == LOW_CONFIDENCE for f in msg.fields)
         rows = best_rows(cloud_to_table(msg, FLAGGED_DETECTION_DTYPE if flagged else DETECTION_DTYPE),
                          self.node.max_detections, self.report_rejection, "detections")
@@ -131,16 +146,36 @@ class AssociationProcessor(MessageProcessor):
         if result.reset:
             self.resets += 1
             self.report_event("detections: stamp jumped; the tracks were reset (new ids keep counting up)")
-        shown = result.tracks.visible(self.output.include_tentative, self.output.include_coasting)
+        self._last_detections = stamp
         self._shown = len(result.tracks.visible())
+        return out + self._outputs(result.tracks, msg.header)
+
+    def _outputs(self, tracks: Tracks, header) -> list:
+        """``tracks`` (every state) and what is drawn of them, with the frame's ``header``."""
+        shown = tracks.visible(self.output.include_tentative, self.output.include_coasting)
         drawn = tracks_to_table(shown)
         trails = self._trails(shown.ids)
-        out = [("tracks", table_to_cloud(tracks_to_table(result.tracks), msg.header)),
-               ("tracks/markers", boxes_to_markers(drawn, msg.header, "tracks", label_field="id", trails=trails)),
-               ("tracks/image_markers", boxes_to_image_marker(drawn, msg.header, "tracks", label_field="id",
+        out = [("tracks", table_to_cloud(tracks_to_table(tracks), header)),
+               ("tracks/markers", boxes_to_markers(drawn, header, "tracks", label_field="id", trails=trails)),
+               ("tracks/image_markers", boxes_to_image_marker(drawn, header, "tracks", label_field="id",
                                                               trails=trails))]
         if self.output.annotate_image:
-            out += self._annotate(stamp, drawn)
+            out += self._annotate(stamp_to_ns(header.stamp), drawn)
+        return out
+
+    def _fill_skipped(self, stamp: int) -> list:
+        """With ``fill_skipped_frames``: the predicted tracks of the camera frames before ``stamp`` (the detections
+        now tracked) that got no detections since the last ones, oldest first; frames up to ``stamp`` are then
+        forgotten."""
+        out = []
+        for frame in sorted(s for s in self._frames if s <= stamp):
+            header = self._frames.pop(frame)
+            if frame == stamp:
+                continue
+            tracks = self.tracker.predicted(frame * 1e-9)
+            if tracks is not None:      # None: before the first detections, or a gap the next step resets
+                self.filled_frames += 1
+                out += self._outputs(tracks, header)
         return out
 
     def _trails(self, ids) -> dict:
@@ -156,9 +191,13 @@ class AssociationProcessor(MessageProcessor):
     def _image(self, msg):
         from aircraft_docking_tracker.images import is_compressed  # noqa: PLC0415
 
+        stamp = stamp_to_ns(msg.header.stamp)
+        if self.output.fill_skipped_frames and (self._last_detections is None or stamp > self._last_detections):
+            self._remember(self._frames, stamp, msg.header)    # its stamp is all the filling needs
+        if not self.output.annotate_image:
+            return []
         if not is_compressed(msg) and int(msg.width) * int(msg.height) > self.node.max_image_pixels:
             raise Rejected(f"image {msg.width}x{msg.height} exceeds max_image_pixels={self.node.max_image_pixels}")
-        stamp = stamp_to_ns(msg.header.stamp)
         if stamp in self._tables:
             return self._publish_image(msg, self._tables.pop(stamp))
         self._remember(self._images, stamp, msg)
@@ -186,12 +225,15 @@ class AssociationProcessor(MessageProcessor):
         self.tracker.reset()
         self._images.clear()
         self._tables.clear()
+        self._frames.clear()
+        self._last_detections = None
 
     def status(self) -> dict:
         states = self.tracker.states
         return {"tracks published": self._shown, "tracks tentative": int((states == 0).sum()),
                 "tracks confirmed": int(np.isin(states, (1, 2, 4)).sum()),
                 "invalid detection rows": self.invalid_detections, "track resets": self.resets,
+                "skipped frames filled": self.filled_frames,
                 "next id": self.tracker.next_id}
 
 

@@ -108,6 +108,47 @@ def test_annotated_image_pairs_image_and_tracks_by_stamp():
     assert out["tracks/image"].header.stamp == header(0).stamp
     assert drawn[20:29, 10].any() and not drawn[150:, 50:].any()       # box edges drawn, elsewhere black
 
+    both = AssociationProcessor(FAST, output=AssociationOutputConfig(annotate_image=True, fill_skipped_frames=True))
+    for k in range(3):
+        both.process("image", numpy_to_image(np.zeros((200, 100, 3), np.uint8), "bgr8", header(k)))
+        if k != 1:                                     # frame 1 skipped by the detector: drawn with its prediction
+            out = both.process("detections", detections_msg(k))
+    assert [m.header.stamp for t, m in out if t == "tracks/image"] == [header(1).stamp, header(2).stamp]
+
+
+def test_skipped_frames_get_the_predicted_tracks_when_the_next_detections_arrive():
+    """fill_skipped_frames: every camera frame gets tracks; a frame the detector skipped gets the tracks predicted to
+    its stamp (coasting), with its own header, published before the next detections' tracks."""
+    trusting = dataclasses.replace(FAST, coast_output_std=1.0)       # 8-px boxes: 0.1 heights is below the noise
+    proc = AssociationProcessor(trusting, output=AssociationOutputConfig(fill_skipped_frames=True))
+    assert "image" in proc.inputs and "image" in proc.latest_only and "tracks/image" not in proc.outputs
+    plain = AssociationProcessor(trusting)
+    assert "image" not in plain.inputs
+
+    def image(k):
+        return numpy_to_image(np.zeros((4, 4, 3), np.uint8), "bgr8", header(k))
+
+    tracked = {}
+    for k in range(10):
+        assert proc.process("image", image(k)) == []
+        if k in (0, 1, 2, 5, 6, 9):                   # the detector skipped frames 3, 4, 7 and 8
+            out = proc.process("detections", detections_msg(k))
+            want = plain.process("detections", detections_msg(k))
+            clouds = [m for topic, m in out if topic == "tracks"]
+            assert [m.header.stamp for m in clouds] == [header(j).stamp for j in range(k + 1) if j not in tracked]
+            assert all(m.header.frame_id == "uav_cam" for m in clouds)
+            assert (cloud_to_table(clouds[-1], TRACK_DTYPE) == cloud_to_table(dict(want)["tracks"], TRACK_DTYPE)).all()
+            tracked.update({j: cloud_to_table(m, TRACK_DTYPE) for j, m in zip(sorted(set(range(k + 1)) - set(tracked)),
+                                                                               clouds)})
+    assert sorted(tracked) == list(range(10)) and proc.filled_frames == 4 and proc.status()["skipped frames filled"] == 4
+    for k in (3, 4, 7, 8):                            # predicted: 2 px a frame to the right, coasting
+        assert sorted(tracked[k]["id"].tolist()) == [1, 2] and (tracked[k]["state"] == 2).all()
+        np.testing.assert_allclose(tracked[k]["x"], 10 + 2 * k, atol=0.5)
+    assert (tracked[6]["state"] == 1).all()
+    proc.process("image", image(11))                  # the stream restarts: the frame waiting is forgotten
+    proc.reset()
+    assert [t for t, _ in proc.process("detections", detections_msg(12))].count("tracks") == 1
+
 
 def test_node_in_process_over_detection_messages_and_bag(tmp_path):
     with ros_context() as (ctx, executor):
