@@ -134,10 +134,10 @@ class AssociationProcessor(MessageProcessor):
         if topic == "image":
             return self._image(msg)
         stamp = stamp_to_ns(msg.header.stamp)
-        out = self._fill_skipped(stamp)
         flagged = any(f.name == LOW_CONFIDENCE for f in msg.fields)
         rows = best_rows(cloud_to_table(msg, FLAGGED_DETECTION_DTYPE if flagged else DETECTION_DTYPE),
                          self.node.max_detections, self.report_rejection, "detections")
+        out = self._fill_skipped(stamp)     # after the message is read: a malformed one loses no waiting frame
         boxes = table_boxes(rows)
         result = self.tracker.step(stamp * 1e-9, boxes, rows["score"], rows["class_id"], low_confidence(rows))
         if result.rejected:

@@ -145,9 +145,16 @@ def test_skipped_frames_get_the_predicted_tracks_when_the_next_detections_arrive
         assert sorted(tracked[k]["id"].tolist()) == [1, 2] and (tracked[k]["state"] == 2).all()
         np.testing.assert_allclose(tracked[k]["x"], 10 + 2 * k, atol=0.5)
     assert (tracked[6]["state"] == 1).all()
-    proc.process("image", image(11))                  # the stream restarts: the frame waiting is forgotten
+    broken = detections_msg(10)
+    broken.data = broken.data[:5]                     # a malformed message is refused; frame 10 keeps waiting
+    proc.process("image", image(10))
+    assert process_guarded(proc, "detections", broken, ProcessingStats()) == []
+    proc.process("image", image(11))
+    out = proc.process("detections", detections_msg(11))
+    assert [m.header.stamp for t, m in out if t == "tracks"] == [header(10).stamp, header(11).stamp]
+    proc.process("image", image(13))                  # the stream restarts: the frame waiting is forgotten
     proc.reset()
-    assert [t for t, _ in proc.process("detections", detections_msg(12))].count("tracks") == 1
+    assert [t for t, _ in proc.process("detections", detections_msg(14))].count("tracks") == 1
 
 
 def test_node_in_process_over_detection_messages_and_bag(tmp_path):
