@@ -18,8 +18,8 @@ of the counted vehicles (MOTA points), the misses split by cause, each in the fi
 
 Seeds: tuning seeds (``UAV_TUNING_SEEDS``: 2000-2005 difficulty 1, 2100-2101 difficulty 2) to choose on; held-out
 seeds as ``bench/uav_detector.py`` (3000-3007, 3100-3103) and the demo's seed 106, used for nothing else.
-Detections are cached per set-up file, overrides and seed in ``out/uav_tracking_cache`` (delete it after
-changing a model file).
+Detections are cached per detector parameters (the set-up file's and the overrides) and seed in
+``out/uav_tracking_cache`` (delete it after changing a model file).
 Writes ``bench/results/uav_tracking.json`` and ``.md``.
 """
 from __future__ import annotations
@@ -101,7 +101,8 @@ def detections(name: str, detector_overrides: dict, seed: int, difficulty: int, 
                                            load_yaml_parameters(SETUP, "detector")["verifier_threshold"])
         tables = detections(name, {**detector_overrides, "low_confidence_band": WIDE_BAND}, seed, difficulty, images)
         return [t[~low_confidence(t) | (t["score"] >= np.float32(expit(threshold - band)))] for t in tables]
-    key = hashlib.sha1((SETUP.read_text() + json.dumps(detector_overrides, sort_keys=True)).encode()).hexdigest()[:10]
+    parameters = {**load_yaml_parameters(SETUP, "detector"), **detector_overrides}   # the association's do not matter
+    key = hashlib.sha1(json.dumps(parameters, sort_keys=True).encode()).hexdigest()[:10]
     path = CACHE / f"{name}_{key}_{seed}_{difficulty}.npz"
     if path.exists():
         stored = np.load(path)
