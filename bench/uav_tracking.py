@@ -1,12 +1,15 @@
 """What holds the UAV camera's MOTA down (issue 12 item 3): the detector + association offline, scored as the demo.
 
-    python bench/uav_tracking.py [--seeds tuning|held-out|demo|all] [--set NAME=key:value,...]
+    python bench/uav_tracking.py [--seeds tuning|held-out|demo|all] [--set NAME=key:value,...] [--busy 1.25 2]
 
 Every frame of each scene (80 frames at 10 Hz, the demo's length and camera height) through the set-up's
 detector (``config/uav_camera.yaml``, ``Detector.detect``) and the association core with the same file's
 parameters, scored by ``evaluate.score_mot`` exactly as ``make demo`` scores its recording (every vehicle at
 least ``hidden_below`` 30 % visible counted, border-cut ones included; hypotheses on hidden vehicles dropped).
-Unlike the live demo no frame is skipped, so the figures are the set-up's, not the machine load's.
+Unlike the live demo no frame is skipped, so the figures are the set-up's, not the machine load's. ``--busy N``
+adds the live case: a keep-newest detector input that takes N frame intervals a frame gets no detections for the
+frames it cannot keep up with (1.25: one frame in five skipped, as ``make demo`` beside the stand camera; 2: every
+other frame), scored without and with the association's ``output.fill_skipped_frames``.
 
 MOTA = 1 - (misses + false positives + identity switches) / counted vehicles; each term is reported as its share
 of the counted vehicles (MOTA points), the misses split by cause, each in the first class that fits:
@@ -43,7 +46,7 @@ from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccum
 from aircraft_docking_tracker.evaluation.evaluate import (  # noqa: E402
     EvaluateConfig, hidden_rows, on_hidden_targets, score_mot)
 from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
-from aircraft_docking_tracker.object_table import confident_rows, low_confidence, table_boxes  # noqa: E402
+from aircraft_docking_tracker.object_table import TRACK_DTYPE, confident_rows, low_confidence, table_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
@@ -55,6 +58,7 @@ SETUP = package_config_dir() / "uav_camera.yaml"
 DEMO_SEED = 106
 CACHE = REPO / "out" / "uav_tracking_cache"
 ORACLE = " oracle boxes"
+BUSY, FILLED = " busy ", " filled"      # --busy variants: a live keep-newest detector, its skipped frames filled
 WIDE_BAND = 4.0   # low_confidence_band the detector runs with when a variant asks for a narrower one
 SEEDS = {"tuning": [(UAV_TUNING_SEEDS.start + k, 1) for k in range(6)] + [(UAV_TUNING_SEEDS.start + 100 + k, 2)
                                                                            for k in range(2)],
@@ -139,14 +143,37 @@ def oracle_boxes(truth, tables, floor: float) -> list[np.ndarray]:
     return out
 
 
-def track(stamps, tables, association_overrides: dict) -> list[np.ndarray]:
-    """Every frame's tracks (all states, ``TRACK_DTYPE``) from the association core with the set-up's parameters."""
+def track(stamps, tables, association_overrides: dict, processed=None, fill: bool = False) -> list[np.ndarray]:
+    """Every frame's tracks (all states, ``TRACK_DTYPE``) from the association core with the set-up's parameters.
+
+    ``processed``: the frames the detector got to (:func:`keep_newest`); the others have no tracks, or with ``fill``
+    the tracks predicted to their stamp when a later frame was detected (what ``association_node`` publishes with
+    ``output.fill_skipped_frames``: ``MultiTargetTracker.predicted`` before the next step)."""
     tracker = build_processor("association", SETUP, association_overrides).tracker
     out = []
-    for stamp, table in zip(stamps, tables):
+    last = max(processed) if processed is not None and len(processed) else len(stamps) - 1
+    for k, (stamp, table) in enumerate(zip(stamps, tables)):
+        if processed is not None and k not in processed:
+            tracks = tracker.predicted(stamp) if fill and k < last else None
+            out.append(tracks_to_table(tracks) if tracks is not None else np.zeros(0, TRACK_DTYPE))
+            continue
         result = tracker.step(stamp, table_boxes(table), table["score"], table["class_id"], low_confidence(table))
         out.append(tracks_to_table(result.tracks))
     return out
+
+
+def keep_newest(frames: int, busy: float) -> set[int]:
+    """The frames a live detector with a keep-newest input processes when each frame takes it ``busy`` frame intervals
+    (frames arrive one interval apart; when it is free it takes the newest frame that has arrived, else waits)."""
+    done, free, last = set(), 0.0, -1
+    while last < frames - 1:
+        newest = min(frames - 1, int(np.floor(free + 1e-9)))
+        if newest <= last:                      # nothing new has arrived: wait for the next frame
+            newest = last + 1
+            free = float(newest)
+        done.add(newest)
+        last, free = newest, free + busy
+    return done
 
 
 def _best_iou(boxes: np.ndarray, box: np.ndarray) -> np.ndarray:
@@ -347,6 +374,10 @@ def main() -> int:
     parser.add_argument("--set", action="append", default=[], metavar="NAME=node.key:json,...",
                         help="a variant beside the set-up: detector.* / association.* parameter overrides")
     parser.add_argument("--out", default=str(HERE / "results" / "uav_tracking"), help="results path without suffix")
+    parser.add_argument("--busy", type=float, nargs="*", default=[], metavar="INTERVALS",
+                        help="also score each variant live: a keep-newest detector input taking INTERVALS frame "
+                        "intervals a frame (the frames it cannot keep up with get no detections), without and with "
+                        "the association's fill_skipped_frames (variant name + ' busy N' / ' busy N filled')")
     parser.add_argument("--oracle-boxes", type=float, default=0.0, metavar="IOU",
                         help="also score each variant with its detections at IoU IOU-0.5 on a counted vehicle moved "
                         "onto its box (a bound for the box regressor; variant name + ' oracle boxes')")
@@ -354,6 +385,8 @@ def main() -> int:
     cv2.setNumThreads(1)
     variants = parse_variants(args.set)
     runs = {**variants, **({name + ORACLE: v for name, v in variants.items()} if args.oracle_boxes > 0 else {})}
+    runs.update({f"{name} busy {busy:g}{filled}": v for name, v in variants.items() for busy in args.busy
+                 for filled in ("", FILLED)})
     seeds = "demo" if args.quick else args.seeds
     groups = list(SEEDS) if seeds == "all" else [seeds]
     results = {"setup": SETUP.name, "variants": {k: {"detector": d, "association": a} for k, (d, a) in variants.items()},
@@ -367,7 +400,13 @@ def main() -> int:
                 groups = rejected_too(det, seed, difficulty, images, tables)
                 if name.endswith(ORACLE):
                     tables, groups = (oracle_boxes(truth, t, args.oracle_boxes) for t in (tables, groups))
-                r = breakdown(truth, tables, track(stamps, tables, assoc), groups=groups)
+                processed = None
+                if BUSY in name:
+                    processed = keep_newest(len(images), float(name.split(BUSY)[1].split()[0]))
+                    tables, groups = ([t if k in processed else t[:0] for k, t in enumerate(ts)] for ts in (tables, groups))
+                r = breakdown(truth, tables, track(stamps, tables, assoc, processed, name.endswith(FILLED)), groups=groups)
+                if processed is not None:
+                    r["frames_detected"] = len(processed)
                 d = detector_counts(truth, tables).summary()
                 r["detector"] = {k: d[k] for k in ("detection_rate", "false_alarm_rate", "true_positives",
                                                    "ground_truth", "false_positives", "detections")}
