@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import PointCloud2
+from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
@@ -182,6 +182,46 @@ def test_node_in_process_over_detection_messages_and_bag(tmp_path):
             assert got[-1].header.stamp == header(5).stamp and got[-1].header.frame_id == "uav_cam"
             first = cloud_to_table(got[0], TRACK_DTYPE)
             assert sorted(first["id"].tolist()) == [1, 2] and (first["state"] == 1).all()   # confirm_first_frame
+        finally:
+            node.destroy_node()
+            probe.destroy_node()
+
+
+def test_node_fills_the_frames_without_detections_over_ros():
+    """The live node with output.fill_skipped_frames (a read-only parameter, as at start-up): images in on the
+    sensor-data subscription, detections for some of them; tracks come out for every image, in stamp order."""
+    from rclpy.qos import qos_profile_sensor_data  # noqa: PLC0415
+
+    with ros_context() as (ctx, executor):
+        node = AssociationNode(context=ctx, parameter_overrides=[
+            Parameter("confirm_length", value=2), Parameter("gate", value="mahalanobis"),
+            Parameter("coast_output_std", value=1.0), Parameter("output.fill_skipped_frames", value=True)])
+        probe = rclpy.create_node("probe", context=ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        got = []
+        probe.create_subscription(PointCloud2, "tracks", got.append, 50)
+        images = probe.create_publisher(Image, "image", qos_profile_sensor_data)
+        detections = probe.create_publisher(PointCloud2, "detections", 50)
+        try:
+            assert wait_for_subscribers(executor, images) and wait_for_subscribers(executor, detections)
+            handled = 0
+            for k in range(8):                  # one message at a time: the image slot is keep-newest
+                images.publish(numpy_to_image(np.zeros((4, 4), np.uint8), "mono8", header(k)))
+                handled += 1
+                assert spin_until(executor, lambda: node.stats.received >= handled, timeout_s=10)
+                if k not in (1, 3, 5):          # the detector skipped frames 1, 3 and 5
+                    detections.publish(detections_msg(k))
+                    handled += 1
+                    assert spin_until(executor, lambda: node.stats.received >= handled, timeout_s=10)
+            assert spin_until(executor, lambda: len(got) == 8, timeout_s=15)
+            assert [m.header.stamp for m in got] == [header(k).stamp for k in range(8)]
+            assert all(m.header.frame_id == "uav_cam" for m in got)
+            filled = {k: cloud_to_table(got[k], TRACK_DTYPE) for k in (1, 3, 5)}
+            assert all(sorted(t["id"].tolist()) == [1, 2] for t in filled.values())
+            assert (filled[1]["state"] == 4).all()          # one detection: its velocity unknown, not trusted
+            assert (filled[3]["state"] == 2).all() and (filled[5]["state"] == 2).all()   # coasting, published
+            assert node.processor.filled_frames == 3
         finally:
             node.destroy_node()
             probe.destroy_node()
