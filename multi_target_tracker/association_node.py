@@ -17,15 +17,15 @@ Topics (relative names):
   ``output.annotate_image``.
 
 With ``output.fill_skipped_frames`` every camera frame gets its tracks: a frame the detector skipped (its
-keep-newest input drops the frames it cannot keep up with) gets the tracks predicted to its stamp (eq. 6,
-published targets coasting, state 2), published just before the tracks of the next detections, so a
-display or a consumer of ``tracks`` sees the camera's rate however slow the detector is.
+keep-newest input drops the frames it cannot keep up with) gets the tracks predicted to its stamp (eq. 6;
+published targets coasting, state 2, while the prediction is trusted), published just before the tracks of
+the next detections, so a consumer of ``tracks`` gets the camera's rate however slow the detector is (the
+last 30 frames waiting at most).
 
 Every output carries the header of the detections message (the image's stamp and frame_id; a skipped
 frame's outputs, the image's own). The frame interval T of the filters comes from those stamps. Invalid
-detection rows (NaN, inf,
-size <= 0) are dropped, counted and reported in ``/diagnostics``; stamps going backwards (a looped
-bag) or jumping reset the tracks; new IDs keep counting up.
+detection rows (NaN, inf, size <= 0) are dropped, counted and reported in ``/diagnostics``; stamps going
+backwards (a looped bag) or jumping reset the tracks; new IDs keep counting up.
 """
 from __future__ import annotations
 
