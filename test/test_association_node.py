@@ -11,7 +11,7 @@ from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp
+from aircraft_docking_tracker.io.bag import BagReader, BagWriter, ns_to_stamp, stamp_to_ns
 from aircraft_docking_tracker.config import load_yaml_parameters, package_config_dir
 from aircraft_docking_tracker.images import image_to_numpy, numpy_to_image
 from aircraft_docking_tracker.object_table import (DETECTION_DTYPE, FLAGGED_DETECTION_DTYPE, LOW_CONFIDENCE, TRACK_DTYPE,
@@ -276,3 +276,47 @@ def test_low_confidence_field_round_trips_and_reaches_the_second_pass():
     assert sorted(with_stage["id"].tolist()) == [1, 2]           # the flagged clutter row started nothing
     assert with_stage["state"][with_stage["id"] == 1].tolist() == [1]   # kept confirmed by its flagged detections
     assert without["state"][without["id"] == 1].tolist() != [1] and 3 not in without["id"]
+
+
+def test_bench_live_case_is_what_the_node_publishes():
+    """bench/uav_tracking.py --busy: its keep-newest schedule, and its filled tracks equal the node's (the UAV set-up's
+    association, images for every frame, detections for the frames the schedule processes)."""
+    import importlib.util  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    spec = importlib.util.spec_from_file_location("bench_uav_tracking",
+                                                  Path(__file__).resolve().parents[1] / "bench" / "uav_tracking.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.keep_newest(10, 0.5) == set(range(10)) and bench.keep_newest(10, 1.0) == set(range(10))
+    assert sorted(bench.keep_newest(10, 1.25)) == [0, 1, 2, 3, 5, 6, 7, 8, 9]      # one frame in five skipped
+    assert sorted(bench.keep_newest(9, 2.0)) == [0, 2, 4, 6, 8]
+
+    frames = 12
+    processed = bench.keep_newest(frames, 2.0)
+    tables = []
+    for k in range(frames):                             # two 40-px vehicles driving apart at 10 Hz
+        table = np.zeros(2, DETECTION_DTYPE)
+        table["x"], table["y"] = [100 + 6 * k, 300 - 4 * k], [200, 100 + 3 * k]
+        table["w"], table["h"], table["score"] = 40, 40, 0.95
+        tables.append(table)
+    stamps = [stamp_to_ns(header(k).stamp) * 1e-9 for k in range(frames)]
+    from_bench = bench.track(stamps, tables, {}, processed, fill=True)
+
+    from aircraft_docking_tracker.offline import build_processor  # noqa: PLC0415
+    node = build_processor("association", package_config_dir() / "uav_camera.yaml")
+    assert node.output.fill_skipped_frames
+    published = {}
+    for k in range(frames):
+        node.process("image", numpy_to_image(np.zeros((4, 4, 3), np.uint8), "bgr8", header(k)))
+        if k in processed:
+            for topic, msg in node.process("detections", table_to_cloud(tables[k], header(k))):
+                if topic == "tracks":
+                    published[stamp_to_ns(msg.header.stamp)] = cloud_to_table(msg, TRACK_DTYPE)
+    assert sorted(processed) == [0, 2, 4, 6, 8, 10, 11] and len(published) == frames
+    for k in range(frames):
+        mine, theirs = from_bench[k], published[stamp_to_ns(header(k).stamp)]
+        assert len(mine) == len(theirs) == 2
+        for name in ("id", "x", "y", "w", "h", "state"):
+            np.testing.assert_array_equal(mine[name], theirs[name])
+    assert (from_bench[1]["state"] == 4).all() and (from_bench[5]["state"] == 2).all()   # untrusted, then coasting
