@@ -6,7 +6,7 @@ import importlib.util
 import cv2
 import numpy as np
 
-from aircraft_docking_tracker.scenarios.uav import UAV_TRAIN_SEEDS, UavScene, UavSceneConfig, detection_truth
+from aircraft_docking_tracker.scenarios.uav import STATE_VISIBLE, UAV_TRAIN_SEEDS, UavScene, UavSceneConfig, detection_truth
 from multi_target_tracker.train_cascade import truncated
 
 from conftest import REPO
@@ -53,3 +53,30 @@ def test_heading_chips_turn_each_vehicle_along_x():
             assert np.ptp(ys) > np.ptp(xs)
             checked += 1
     assert checked >= 5
+
+
+def test_partly_visible_chips_are_added_beside_the_same_counted_chips(tmp_path):
+    """--partly-visible V adds pSEED_ chips of the vehicles V to 70 % visible (not cut by the border), from their own
+    random stream: the counted vehicles' cSEED_ chips are the same files as without it."""
+    tool = load_tool()
+    seed = UAV_TRAIN_SEEDS[0] + 1                      # difficulty 2: canopy and smoke over some vehicles
+    common = ["--heading", "--seeds", str(seed), str(seed), "--frames", "48", "--every", "8"]
+    assert tool.main([str(tmp_path / "plain")] + common) == 0
+    assert tool.main([str(tmp_path / "partly"), "--partly-visible", "0.4"] + common) == 0
+    plain = sorted(p.name for p in (tmp_path / "plain" / "images").iterdir())
+    partly = sorted(p.name for p in (tmp_path / "partly" / "images").iterdir())
+    added = [n for n in partly if n.startswith("p")]
+    assert [n for n in partly if not n.startswith("p")] == plain and added
+    for name in (n for n in plain if n.startswith("c")):
+        assert (tmp_path / "plain" / "images" / name).read_bytes() == (tmp_path / "partly" / "images" / name).read_bytes()
+    scene = UavScene(UavSceneConfig(frames=48, difficulty=(1, 2, 1, 2, 0)[seed % 5], ground_resolution=3.0), seed=seed)
+    expected = set()
+    for k, frame in enumerate(scene.frames()):
+        if k % 8 != 4:
+            continue
+        gt = frame.ground_truth
+        boxes, _ = detection_truth(gt)
+        cut = truncated(boxes, (frame.image.shape[1], frame.image.shape[0]))
+        partly_seen = (gt["state"] == STATE_VISIBLE) & (gt["score"] >= 0.4) & (gt["score"] < 0.7) & ~cut
+        expected |= {f"p{seed:04d}_f{k:03d}_v{int(v):02d}_{t}.png" for v in gt["id"][partly_seen] for t in (0, 1)}
+    assert set(added) == expected

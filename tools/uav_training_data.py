@@ -27,6 +27,8 @@ the frame's homography) lies along x, give or take a random turn of up to ``--tu
 box around it; the box (class 0) is the vehicle's length x width reshaped to 2:1 (same area) and
 enlarged ``--context`` times. A vehicle at any heading then looks alike in the window: along it, with
 its outline, tracks or windows at the same places, which the upright 3:2 windows never showed.
+``--partly-visible V`` adds such chips (``pSEED_...``) of the vehicles from V to 70 % visible, partly under canopy
+or smoke, each boxed as the whole vehicle (occlusion as the scenes make it; measured in docs/uav_camera.md).
 """
 from __future__ import annotations
 
@@ -99,6 +101,10 @@ def main(argv=None) -> int:
     parser.add_argument("--turns", type=int, default=2, help="--heading: chips per vehicle and frame")
     parser.add_argument("--turn-jitter", type=float, default=22.5, help="--heading: chips turned up to this many "
                         "degrees off the vehicle's axis (half the detector's angle step)")
+    parser.add_argument("--partly-visible", type=float, default=None, metavar="V",
+                        help="--heading: also chips (pSEED_...) of the vehicles from V to 70 %% visible, partly under "
+                        "canopy or smoke, boxed as the whole vehicle; drawn from their own random stream, so the "
+                        "counted vehicles' chips stay the same")
     args = parser.parse_args(argv)
     if args.context is None:     # the shipped models': 1.3 (upright, uav_vehicles_low), 1.25 (heading-aligned)
         args.context = 1.25 if args.heading else 1.3
@@ -114,6 +120,7 @@ def main(argv=None) -> int:
                                 ground_resolution=args.ground_resolution)
         scene = UavScene(config, seed=seed)
         rng = np.random.default_rng([seed, 7])
+        rng_partly = np.random.default_rng([seed, 8])
         for k, frame in enumerate(scene.frames()):
             if k % args.every != args.every // 2:
                 continue
@@ -123,16 +130,22 @@ def main(argv=None) -> int:
             if args.heading:
                 lines = [yolo_line(1, b, size) for b in boxes]
                 counted = ~ignore & ~truncated(boxes, size)
-                for vid in frame.ground_truth["id"][counted]:
-                    centre, length, width, heading = vehicle_axes(scene, int(vid) - 1, k, frame.homography)
-                    for turn in range(args.turns):
-                        chip, box = heading_chip(frame.image, centre, length, width,
-                                                 heading + rng.uniform(-args.turn_jitter, args.turn_jitter), args.context)
-                        chip_name = f"c{seed:04d}_f{k:03d}_v{int(vid):02d}_{turn}"
-                        cv2.imwrite(str(out / "images" / f"{chip_name}.png"), chip)
-                        (out / "labels" / f"{chip_name}.txt").write_text(
-                            yolo_line(0, box, (chip.shape[1], chip.shape[0])) + "\n")
-                        positives += 1
+                chips = [("c", rng, counted)]
+                if args.partly_visible is not None:
+                    partly = ignore & ~detection_truth(frame.ground_truth, args.partly_visible)[1] & ~truncated(boxes, size)
+                    chips.append(("p", rng_partly, partly))
+                for prefix, stream, chosen in chips:
+                    for vid in frame.ground_truth["id"][chosen]:
+                        centre, length, width, heading = vehicle_axes(scene, int(vid) - 1, k, frame.homography)
+                        for turn in range(args.turns):
+                            chip, box = heading_chip(frame.image, centre, length, width,
+                                                     heading + stream.uniform(-args.turn_jitter, args.turn_jitter),
+                                                     args.context)
+                            chip_name = f"{prefix}{seed:04d}_f{k:03d}_v{int(vid):02d}_{turn}"
+                            cv2.imwrite(str(out / "images" / f"{chip_name}.png"), chip)
+                            (out / "labels" / f"{chip_name}.txt").write_text(
+                                yolo_line(0, box, (chip.shape[1], chip.shape[0])) + "\n")
+                            positives += 1
             else:
                 lines = [yolo_line(1, b, size) if ig else yolo_line(0, window_box(b, context=args.context), size)
                          for b, ig in zip(boxes, ignore)]
