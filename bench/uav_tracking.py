@@ -58,7 +58,7 @@ SETUP = package_config_dir() / "uav_camera.yaml"
 DEMO_SEED = 106
 CACHE = REPO / "out" / "uav_tracking_cache"
 ORACLE = " oracle boxes"
-BUSY, FILLED = " busy ", " filled"      # --busy variants: a live keep-newest detector, its skipped frames filled
+BUSY, FILLED = " busy ", " filled"      # --busy runs' names: a live keep-newest detector, its skipped frames filled
 WIDE_BAND = 4.0   # low_confidence_band the detector runs with when a variant asks for a narrower one
 SEEDS = {"tuning": [(UAV_TUNING_SEEDS.start + k, 1) for k in range(6)] + [(UAV_TUNING_SEEDS.start + 100 + k, 2)
                                                                            for k in range(2)],
@@ -385,8 +385,12 @@ def main() -> int:
     cv2.setNumThreads(1)
     variants = parse_variants(args.set)
     runs = {**variants, **({name + ORACLE: v for name, v in variants.items()} if args.oracle_boxes > 0 else {})}
-    runs.update({f"{name} busy {busy:g}{filled}": v for name, v in variants.items() for busy in args.busy
-                 for filled in ("", FILLED)})
+    live = {}                           # run name -> (frame intervals a frame, filled) of the --busy runs
+    for name, variant in variants.items():
+        for busy in args.busy:
+            for fill in (False, True):
+                run = f"{name}{BUSY}{busy:g}{FILLED if fill else ''}"
+                runs[run], live[run] = variant, (busy, fill)
     seeds = "demo" if args.quick else args.seeds
     groups = list(SEEDS) if seeds == "all" else [seeds]
     results = {"setup": SETUP.name, "variants": {k: {"detector": d, "association": a} for k, (d, a) in variants.items()},
@@ -400,11 +404,12 @@ def main() -> int:
                 groups = rejected_too(det, seed, difficulty, images, tables)
                 if name.endswith(ORACLE):
                     tables, groups = (oracle_boxes(truth, t, args.oracle_boxes) for t in (tables, groups))
-                processed = None
-                if BUSY in name:
-                    processed = keep_newest(len(images), float(name.split(BUSY)[1].split()[0]))
+                processed, fill = None, False
+                if name in live:
+                    busy, fill = live[name]
+                    processed = keep_newest(len(images), busy)
                     tables, groups = ([t if k in processed else t[:0] for k, t in enumerate(ts)] for ts in (tables, groups))
-                r = breakdown(truth, tables, track(stamps, tables, assoc, processed, name.endswith(FILLED)), groups=groups)
+                r = breakdown(truth, tables, track(stamps, tables, assoc, processed, fill), groups=groups)
                 if processed is not None:
                     r["frames_detected"] = len(processed)
                 d = detector_counts(truth, tables).summary()
