@@ -601,8 +601,7 @@ class MultiTargetTracker:
             raise AssociationError(f"stamp {stamp} is not a finite number of seconds")
         if self.last_stamp is None or not 0 < stamp - self.last_stamp <= self.config.max_frame_gap:
             return None
-        bank = KalmanBank(self.kalman_config)
-        bank.x, bank.cov, bank.size = self.bank.x.copy(), self.bank.cov.copy(), self.bank.size.copy()
+        bank = self.bank.copy()
         bank.predict(stamp - self.last_stamp)
         states = self.states.copy()
         published = np.isin(states, (CONFIRMED, COASTING))

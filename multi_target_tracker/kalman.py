@@ -131,6 +131,12 @@ class KalmanBank:
         self.cov = np.concatenate([self.cov, cov])
         self.size = np.concatenate([self.size, xywh[:, 2:4]])
 
+    def copy(self) -> "KalmanBank":
+        """An independent bank with the same filters (same config): predicting it leaves this one as it is."""
+        bank = KalmanBank(self.config)
+        bank.x, bank.cov, bank.size = self.x.copy(), self.cov.copy(), self.size.copy()
+        return bank
+
     def keep(self, mask: np.ndarray) -> None:
         """Keep only the targets where ``mask`` is True (deletion, §3.3 rule 1)."""
         self.x, self.cov, self.size = self.x[mask], self.cov[mask], self.size[mask]

@@ -86,3 +86,18 @@ def test_noise_grows_with_box_height():
     bank.predict(0.5)
     # velocity variance grows by σ² T² with σ = 10 + 2 h: 30 and 210 px/s²
     np.testing.assert_allclose(bank.P[:, 1, 1] - before[:, 1, 1], [30 ** 2 * 0.25, 210 ** 2 * 0.25])
+
+
+def test_copy_predicts_apart_from_the_original():
+    bank = KalmanBank(KalmanConfig())
+    bank.add(np.array([[10.0, 20.0, 30.0, 40.0], [100.0, 50.0, 20.0, 10.0]]))
+    bank.update(np.array([0, 1]), np.array([[26.0, 41.0], [111.0, 54.0]]))
+    before = (bank.x.copy(), bank.cov.copy(), bank.size.copy())
+    twin = bank.copy()
+    twin.predict(0.5)
+    assert twin.config is bank.config and not np.array_equal(twin.cov, before[1])
+    for now, then in zip((bank.x, bank.cov, bank.size), before):
+        np.testing.assert_array_equal(now, then)
+    bank.predict(0.5)                                   # the same prediction on the original: the same numbers
+    for mine, theirs in zip((twin.x, twin.cov, twin.size), (bank.x, bank.cov, bank.size)):
+        np.testing.assert_array_equal(mine, theirs)
