@@ -252,3 +252,28 @@ def test_training_tools_build_the_setups_cascade_alone():
     # and scan as when the shipped verifier and box regressor were trained: before the colour blobs' views
     assert not det.config.blob_views and det.config.turned_crop == 0
     assert det.config.scale_factor == BEFORE_BLOBS["scale_factor"]
+
+
+def test_training_tools_take_overrides_of_the_setup():
+    """``--set KEY=JSON`` reaches every scan of the training tools, after the tool's own settings (so another cascade's
+    second stages can be trained without editing config/uav_camera.yaml); malformed items stop with a clear message."""
+    import sys
+    from pathlib import Path
+    tools = str(Path(__file__).resolve().parent.parent / "tools")
+    sys.path.insert(0, tools)
+    try:
+        from train_uav_verifier import cascade_detector, parse_overrides, setup_detector, setup_verifier
+    finally:
+        sys.path.remove(tools)
+    overrides = parse_overrides(['model="uav_vehicles_heading.json"', "group_shape=\"turned\"", "min_neighbors=5"])
+    assert overrides == {"model": "uav_vehicles_heading.json", "group_shape": "turned", "min_neighbors": 5}
+    det = cascade_detector(overrides)
+    assert Path(det.config.model).name == "uav_vehicles_heading.json" and det.verifier is None
+    assert det.config.group_shape == "turned" and det.config.min_neighbors == 5   # the override wins over the tool's
+    assert setup_detector(overrides).verifier is not None          # the whole set-up keeps its verifier
+    # the set-up's tree verifier, or the logistic one named instead
+    assert type(setup_verifier()).__name__ == "TreeVerifier"
+    assert type(setup_verifier({"verifier": "uav_vehicles_verifier.json"})).__name__ == "Verifier"
+    for bad in (["model"], ["min_neighbors=three"]):
+        with pytest.raises(SystemExit, match="--set"):
+            parse_overrides(bad)

@@ -13,6 +13,9 @@
    ``containment`` of ``--containment`` and ``min_neighbors`` of ``--min-neighbors`` the verifier threshold of
    best detection minus false alarms pooled (``train_uav_verifier.operating_point``); the best is written into
    the model's ``info`` (copy it into config/uav_camera.yaml). The evaluation seeds are not touched.
+
+``--set KEY=JSON`` (repeatable) overrides a detector parameter of the set-up in every scan, as in
+tools/train_uav_verifier.py (e.g. another cascade's ``model``, or with ``--image-stages`` the regressor to extend).
 """
 from __future__ import annotations
 
@@ -32,10 +35,9 @@ from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
 from multi_target_tracker.box_regression import (  # noqa: E402
     edge_offsets, fit_box_regressor, fit_image_stage, image_stage_features, member_features)
 from multi_target_tracker.detector import MODELS_DIR, Detector, members_stats  # noqa: E402
-from aircraft_docking_tracker.config import package_config_dir  # noqa: E402
-from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from train_uav_verifier import (  # noqa: E402
-    SETUP, TUNING, cascade_detector, operating_point, scene_frames, setup_verifier, training_scenes)
+    TUNING, cascade_detector, operating_point, parse_overrides, scene_frames, setup_detector, setup_verifier,
+    training_scenes)
 
 
 def samples(det: Detector, seeds) -> tuple[np.ndarray, np.ndarray]:
@@ -99,9 +101,9 @@ def image_stage_iou(stages, groups) -> tuple[np.ndarray, np.ndarray]:
     return np.array(before), np.array(after)
 
 
-def train_image_stages(args) -> int:
+def train_image_stages(args, overrides: dict) -> int:
     """``--image-stages``: see the module docstring."""
-    det = build_processor("detector", package_config_dir() / SETUP).detector
+    det = setup_detector(overrides)
     regressor = det.box_regressor
     train = training_scenes(args.train_scenes)
     groups = published_groups(det, train, 2)
@@ -145,13 +147,16 @@ def main() -> int:
     parser.add_argument("--grow", type=float, default=1.3, help="image stages: region grown this many times")
     parser.add_argument("--size", type=int, default=32, help="image stages: region resampled to size x size px")
     parser.add_argument("--image-l2", type=float, default=30.0, help="image stages: ridge penalty")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=JSON",
+                        help="override a detector parameter of the set-up in every scan (repeatable)")
     args = parser.parse_args()
+    overrides = parse_overrides(args.set)
     cv2.setNumThreads(1)
     if args.image_stages:
         args.out = args.out or str(MODELS_DIR / "uav_vehicles_box_regressor_image.json")
-        return train_image_stages(args)
+        return train_image_stages(args, overrides)
     args.out = args.out or str(MODELS_DIR / "uav_vehicles_box_regressor.json")
-    det = cascade_detector({"box_scale": 1.0})
+    det = cascade_detector({"box_scale": 1.0, **overrides})
     train = training_scenes(args.train_scenes)
     x, y = samples(det, train)
     regressor = fit_box_regressor(x, y, args.l2)
@@ -160,7 +165,7 @@ def main() -> int:
                            "min_windows": det.config.min_neighbors})
     out = Path(args.out)
     regressor.save(out)
-    det.verifier = setup_verifier()
+    det.verifier = setup_verifier(overrides)
     det.box_regressor = regressor
     base, best = det.config, None
     for containment in args.containment:

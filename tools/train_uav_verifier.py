@@ -21,11 +21,16 @@ by an explicit sweep (each threshold applied before containment suppression, as 
 best detection at false alarms <= ``--max-false-alarms`` (issue 12's target, 0.15) on the tuning seeds. It scans with
 the set-up as it is: since session 33 with the colour blobs' views, which the shipped trees (trained in session 9b)
 never saw; retrained with them they measured worse (docs/uav_camera.md, session 33), so the shipped model stays.
+
+``--set KEY=JSON`` (repeatable) overrides a detector parameter of the set-up in every scan the tool makes, e.g.
+``--set model='"/tmp/other_cascade.json"'`` to train the second stages of another cascade; tools/
+train_uav_box_regressor.py takes the same option.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 from pathlib import Path
 
@@ -62,19 +67,38 @@ def scene_frames(seed: int, difficulty: int, every: int, min_visible: float = 0.
             yield frame.image, boxes, ignore
 
 
-def cascade_detector(overrides: dict | None = None) -> Detector:
-    # the shipped verifier and box regressor were trained on the scan's windows, before the colour blobs' views
-    detector = build_processor("detector", package_config_dir() / SETUP,
-                               {"verifier": "", "box_regressor": "", "low_confidence_band": 0.0, **UAV_BEFORE_BLOBS,
-                                **(overrides or {})}).detector
+def parse_overrides(items: list[str]) -> dict:
+    """``--set KEY=JSON`` items as a dict of detector parameters."""
+    overrides = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--set {item!r}: expected KEY=JSON")
+        try:
+            overrides[key] = json.loads(value)
+        except json.JSONDecodeError as error:
+            raise SystemExit(f"--set {item!r}: the value is not JSON ({error})") from None
+    return overrides
+
+
+def setup_detector(overrides: dict | None = None) -> Detector:
+    """The set-up's detector (config/uav_camera.yaml's) with ``overrides``."""
+    detector = build_processor("detector", package_config_dir() / SETUP, overrides or {}).detector
     if detector is None:
-        raise SystemExit(f"{SETUP}: the detector cannot be built")
+        raise SystemExit(f"{SETUP} with {overrides}: the detector cannot be built")
     return detector
 
 
-def setup_verifier():
-    """The set-up's colour verifier (config/uav_camera.yaml's)."""
-    return build_processor("detector", package_config_dir() / SETUP, {"box_regressor": ""}).detector.verifier
+def cascade_detector(overrides: dict | None = None) -> Detector:
+    """The set-up's cascade alone, scanning as before the colour blobs' views (the shipped verifier and box
+    regressor were trained on the scan's windows then); ``overrides`` last."""
+    return setup_detector({"verifier": "", "box_regressor": "", "low_confidence_band": 0.0, **UAV_BEFORE_BLOBS,
+                           **(overrides or {})})
+
+
+def setup_verifier(overrides: dict | None = None):
+    """The set-up's colour verifier (config/uav_camera.yaml's, or the one ``overrides`` name)."""
+    return setup_detector({**(overrides or {}), "box_regressor": ""}).verifier
 
 
 def training_scenes(n: int) -> list[tuple[int, int]]:
@@ -185,10 +209,13 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=150, help="boosting rounds (--trees)")
     parser.add_argument("--max-false-alarms", type=float, default=0.15, help="false-alarm cap of the threshold "
                         "choice (--trees)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=JSON",
+                        help="override a detector parameter of the set-up in every scan (repeatable)")
     args = parser.parse_args()
+    overrides = parse_overrides(args.set)
     cv2.setNumThreads(1)
     if args.trees:
-        det = build_processor("detector", package_config_dir() / SETUP).detector
+        det = setup_detector(overrides)
         train = training_scenes(args.train_scenes)
         x, y = samples(det, train, args.min_windows, refined=True)
         verifier = fit_tree_verifier(x, y, args.rounds)
@@ -203,7 +230,8 @@ def main() -> int:
               f"{verifier.info['samples'] - verifier.info['positives']} background groups; "
               f"operating point {verifier.info['operating_point']}")
         return 0
-    det = cascade_detector({} if args.window_margin is None else {"window_margin": args.window_margin})
+    det = cascade_detector({**({} if args.window_margin is None else {"window_margin": args.window_margin}),
+                            **overrides})
     train = training_scenes(args.train_scenes)
     x, y = samples(det, train, args.min_windows)
     verifier = fit_verifier(x, y, args.l2)
