@@ -172,30 +172,60 @@ def test_extent_is_not_measured_when_the_silhouette_runs_off_the_search_region_o
     assert foreground_extent(fg, ag.from_box(100, 100, 80, 40), 1.0) is None
 
 
+_RENDERED: dict = {}      # (config, scene seed, count) -> (frames, quads): several tests track the same scene
+_TRACKED: dict = {}       # (scene key, tracker config) -> X̂ of every frame after the start
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _forget_the_scenes():
+    """Keep the rendered scenes and tracks for this module's tests only (about 50 MB a full scene)."""
+    yield
+    _RENDERED.clear()
+    _TRACKED.clear()
+
+
 def scene_frames(config, seed, count=None):
     """A docking scene's grey frames and true quadrilaterals (N, 4, 2) (a DockingFrame carries float masks);
-    ``count``: only the first so many."""
+    ``count``: only the first so many. Rendered once per module (the frames are read-only): the scene generator
+    is deterministic, and the first ``count`` frames of a whole scene are those of a ``count``-frame rendering."""
     import itertools  # noqa: PLC0415
 
     import cv2  # noqa: PLC0415
 
-    frames, quads = [], []
-    for f in itertools.islice(DockingScene(config, seed=seed).frames(), count):
-        frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
-        quads.append(f.quad)
-    return frames, np.array(quads)
+    whole = _RENDERED.get((repr(config), seed, None))
+    if whole is not None:
+        return whole[0][:count], whole[1][:count]
+    key = (repr(config), seed, count)
+    if key not in _RENDERED:
+        frames, quads = [], []
+        for f in itertools.islice(DockingScene(config, seed=seed).frames(), count):
+            frames.append(cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY))
+            frames[-1].setflags(write=False)
+            quads.append(f.quad)
+        _RENDERED[key] = (frames, np.array(quads))
+    return _RENDERED[key]
 
 
-def stop_scale_ratio(frames, quads, extent_gain, seed):
+def tracked_from_the_polygon(config, scene_seed, tracker_config) -> np.ndarray:
+    """X̂ (N - 1, 3, 3) of every frame after the first of a track of the scene started on its first polygon;
+    computed once per module for each (scene, tracker configuration)."""
+    key = (repr(config), scene_seed, repr(tracker_config))
+    if key not in _TRACKED:
+        frames, quads = scene_frames(config, scene_seed)
+        tracker = DockingTracker(tracker_config)
+        tracker.start(frames[0], quads[0])
+        _TRACKED[key] = np.array([tracker.step(frame).matrix for frame in frames[1:]])
+    return _TRACKED[key]
+
+
+def stop_scale_ratio(config, scene_seed, extent_gain, seed):
     # the shipped defaults otherwise (the target motion on): the extent is skipped while no corner under X̂
     # moves (extent_still), which needs the motion measured. With the motion off, the running background
     # absorbs the stopped aircraft and the extent grew the scale to 1.47-1.53x the truth in the last 10
     # frames for 3 of 5 tracker seeds on an AVX BLAS (OPENBLAS_CORETYPE=Sandybridge; 0 of 5 on Haswell)
-    tracker = DockingTracker(DockingConfig(extent_gain=extent_gain, seed=seed))
-    tracker.start(frames[0], quads[0])
-    for frame in frames[1:]:
-        r = tracker.step(frame)
-    return ag.to_params(r.matrix)[2] / ag.to_params(ag.from_quad(quads[-1]))[2]
+    matrices = tracked_from_the_polygon(config, scene_seed, DockingConfig(extent_gain=extent_gain, seed=seed))
+    _, quads = scene_frames(config, scene_seed)
+    return ag.to_params(matrices[-1])[2] / ag.to_params(ag.from_quad(quads[-1]))[2]
 
 
 def test_extent_correction_keeps_the_scale_up_with_a_growing_aircraft():
@@ -204,9 +234,8 @@ def test_extent_correction_keeps_the_scale_up_with_a_growing_aircraft():
     Sandybridge, Prescott and SkylakeX BLAS kernels). Medians over 5 tracker seeds."""
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
-    frames, quads = scene_frames(config, 100)
-    without = np.median([stop_scale_ratio(frames, quads, 0.0, s) for s in range(5)])
-    with_fg = np.median([stop_scale_ratio(frames, quads, 0.3, s) for s in range(5)])
+    without = np.median([stop_scale_ratio(config, 100, 0.0, s) for s in range(5)])
+    with_fg = np.median([stop_scale_ratio(config, 100, 0.3, s) for s in range(5)])
     assert with_fg > without + 0.1
     assert 0.85 < with_fg < 1.15
 
@@ -593,15 +622,15 @@ def test_a_lagging_estimates_own_target_is_measured_on_the_wide_grid(width_facto
     assert off._silhouette(fg, estimate) is None
 
 
-def late_rotation_error(frames, quads, rotation_gain, seed, **overrides):
+def late_rotation_error(config, scene_seed, rotation_gain, seed, **overrides):
     """Median |rotation error| [deg] over the last 40 % of a track started on the first polygon."""
-    tracker = DockingTracker(DockingConfig(rotation_gain=rotation_gain, seed=seed, **overrides))
-    tracker.start(frames[0], quads[0])
+    matrices = tracked_from_the_polygon(config, scene_seed,
+                                        DockingConfig(rotation_gain=rotation_gain, seed=seed, **overrides))
+    _, quads = scene_frames(config, scene_seed)
     errors = []
-    for k, frame in enumerate(frames[1:], 1):
-        r = tracker.step(frame)
-        if k >= 0.6 * len(frames):
-            turn = ag.to_params(r.matrix)[4] - ag.to_params(ag.from_quad(quads[k]))[4]
+    for k, matrix in enumerate(matrices, 1):
+        if k >= 0.6 * len(quads):
+            turn = ag.to_params(matrix)[4] - ag.to_params(ag.from_quad(quads[k]))[4]
             errors.append(abs((turn + np.pi / 2) % np.pi - np.pi / 2))
     return float(np.rad2deg(np.median(errors)))
 
@@ -614,9 +643,8 @@ def test_the_estimate_turns_with_the_aircraft_to_the_silhouettes_axis():
     about 1 deg. Medians over 3 tracker seeds."""
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
-    frames, quads = scene_frames(config, 100)
-    off = np.median([late_rotation_error(frames, quads, 0.0, s, learn_rotation="estimate") for s in range(3)])
-    on = np.median([late_rotation_error(frames, quads, 0.3, s, learn_rotation="estimate") for s in range(3)])
+    off = np.median([late_rotation_error(config, 100, 0.0, s, learn_rotation="estimate") for s in range(3)])
+    on = np.median([late_rotation_error(config, 100, 0.3, s, learn_rotation="estimate") for s in range(3)])
     assert on < 4.0 and on < off - 4.0, (off, on)
 
 
@@ -628,11 +656,10 @@ def test_the_model_learnt_at_the_silhouettes_rotation_turns_the_estimate_with_th
     (probe: 0.5-1 deg late). Medians over 3 tracker seeds."""
     config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
                                 growth=4.0, turn_deg=20.0, difficulty=1)
-    frames, quads = scene_frames(config, 100)
-    off = np.median([late_rotation_error(frames, quads, 0.0, s, learn_rotation="estimate") for s in range(3)])
-    on = np.median([late_rotation_error(frames, quads, 0.0, s, learn_rotation="silhouette") for s in range(3)])
+    off = np.median([late_rotation_error(config, 100, 0.0, s, learn_rotation="estimate") for s in range(3)])
+    on = np.median([late_rotation_error(config, 100, 0.0, s, learn_rotation="silhouette") for s in range(3)])
     assert on < 4.0 and on < off - 4.0, (off, on)
-    defaults = np.median([late_rotation_error(frames, quads, 0.0, s) for s in range(3)])
+    defaults = np.median([late_rotation_error(config, 100, 0.0, s) for s in range(3)])
     assert defaults < 4.0, defaults       # the default (shaped) learns so on a polygon start
 
 
