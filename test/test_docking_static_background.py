@@ -678,8 +678,6 @@ def restart_mid_approach(frames, quads, restart_background, seed, at=34, after=2
     """Track from the first polygon, restart at frame ``at`` on the aircraft's bounding box (what the detector
     gives a lost track), then ``after`` frames: the fraction of them with the extent measured, and the median
     fraction of the aircraft's true rectangle that is foreground."""
-    import cv2  # noqa: PLC0415
-
     # rotation_gain 0 (the default): with the turn at 0.3 the new background's extent is measured on 0.65 of the
     # frames, no longer under 0.5
     tracker = DockingTracker(DockingConfig(restart_background=restart_background, seed=seed, rotation_gain=0.0))
