@@ -8,6 +8,9 @@ STAMP := $(VENV)/.setup-done
 # Every command below runs with the ROS 2 environment set once, in a fixed order.
 RUN := source tools/ros_env.sh $(VENV) &&
 PYTEST_ARGS ?=
+# pytest-xdist workers (each test module runs whole on one worker: its fixtures and ROS domain stay its own);
+# 0 runs the suite in this process
+TEST_WORKERS ?= 2
 DEMO_OUT ?= out/demo
 BENCH_ARGS ?=
 
@@ -38,10 +41,10 @@ $(STAMP): requirements.txt requirements-ros.txt requirements-test.txt setup.py s
 	@touch $(STAMP)
 
 test: setup
-	$(RUN) python -m pytest $(PYTEST_ARGS)
+	$(RUN) python -m pytest -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 test-fast: setup
-	$(RUN) python -m pytest -m "not slow" $(PYTEST_ARGS)
+	$(RUN) python -m pytest -n $(TEST_WORKERS) --dist loadfile -m "not slow" $(PYTEST_ARGS)
 
 demo: setup
 	$(RUN) python tools/demo.py --out $(DEMO_OUT)

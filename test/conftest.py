@@ -10,9 +10,19 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 SHARED_DATA = Path(os.environ.get("ADT_SHARED_DATA", REPO.parent / "shared" / "data"))
 
-# One ROS domain per pytest process, chosen at random and kept on this host, so that parallel runs
-# on one machine (developers, CI) never see each other's topics.
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random(os.getpid()).randint(1, 100)))
+
+def _test_domain() -> str:
+    """One ROS domain per pytest run, chosen at random (or the caller's ROS_DOMAIN_ID), so that parallel runs on one
+    machine (developers, CI) never see each other's topics; each pytest-xdist worker of the run takes the next
+    domain after it (a worker inherits the run's environment), so the workers never see each other's either."""
+    base = os.environ.get("ADT_TEST_BASE_DOMAIN") or os.environ.get("ROS_DOMAIN_ID") \
+        or str(random.Random(os.getpid()).randint(1, 100))
+    os.environ["ADT_TEST_BASE_DOMAIN"] = base
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    return str((int(base) + int(worker[2:])) % 100 + 1) if worker.startswith("gw") else base
+
+
+os.environ["ROS_DOMAIN_ID"] = _test_domain()
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 
