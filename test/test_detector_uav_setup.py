@@ -274,6 +274,6 @@ def test_training_tools_take_overrides_of_the_setup():
     # the set-up's tree verifier, or the logistic one named instead
     assert type(setup_verifier()).__name__ == "TreeVerifier"
     assert type(setup_verifier({"verifier": "uav_vehicles_verifier.json"})).__name__ == "Verifier"
-    for bad in (["model"], ["min_neighbors=three"]):
+    for bad in (["model"], ["min_neighbors=three"], ["min_neighbours=3"]):
         with pytest.raises(SystemExit, match="--set"):
             parse_overrides(bad)

@@ -49,7 +49,7 @@ from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     detection_truth)
 from multi_target_tracker.box_regression import member_features  # noqa: E402
 from multi_target_tracker.detector import (  # noqa: E402
-    MODELS_DIR, Detector, members_stats, suppress_contained)
+    MODELS_DIR, Detector, DetectorConfig, members_stats, suppress_contained)
 from multi_target_tracker.verifier import features, fit_tree_verifier, fit_verifier  # noqa: E402
 from scipy.special import expit  # noqa: E402
 
@@ -68,12 +68,16 @@ def scene_frames(seed: int, difficulty: int, every: int, min_visible: float = 0.
 
 
 def parse_overrides(items: list[str]) -> dict:
-    """``--set KEY=JSON`` items as a dict of detector parameters."""
+    """``--set KEY=JSON`` items as a dict of detector parameters (``DetectorConfig``'s fields: a misspelt key would
+    otherwise be ignored and the set-up trained on as it is)."""
+    known = {f.name for f in dataclasses.fields(DetectorConfig)}
     overrides = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep:
             raise SystemExit(f"--set {item!r}: expected KEY=JSON")
+        if key not in known:
+            raise SystemExit(f"--set {item!r}: {key!r} is not a detector parameter")
         try:
             overrides[key] = json.loads(value)
         except json.JSONDecodeError as error:
