@@ -11,6 +11,7 @@ PYTEST_ARGS ?=
 # pytest-xdist workers (each test module runs whole on one worker: its fixtures and ROS domain stay its own);
 # 0 runs the suite in this process
 TEST_WORKERS ?= 2
+PYTEST := python -m pytest -n $(TEST_WORKERS) --dist loadfile
 DEMO_OUT ?= out/demo
 BENCH_ARGS ?=
 
@@ -41,10 +42,10 @@ $(STAMP): requirements.txt requirements-ros.txt requirements-test.txt setup.py s
 	@touch $(STAMP)
 
 test: setup
-	$(RUN) python -m pytest -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
+	$(RUN) $(PYTEST) $(PYTEST_ARGS)
 
 test-fast: setup
-	$(RUN) python -m pytest -n $(TEST_WORKERS) --dist loadfile -m "not slow" $(PYTEST_ARGS)
+	$(RUN) $(PYTEST) -m "not slow" $(PYTEST_ARGS)
 
 demo: setup
 	$(RUN) python tools/demo.py --out $(DEMO_OUT)

@@ -172,6 +172,9 @@ def test_extent_is_not_measured_when_the_silhouette_runs_off_the_search_region_o
     assert foreground_extent(fg, ag.from_box(100, 100, 80, 40), 1.0) is None
 
 
+# the clear 4x approach, 20 deg turned, that several tests below track (with scene seed 100: a tuning scene)
+APPROACH = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
+                              growth=4.0, turn_deg=20.0, difficulty=1)
 _RENDERED: dict = {}      # (config, scene seed, count) -> (frames, quads): several tests track the same scene
 _TRACKED: dict = {}       # (scene key, tracker config) -> X̂ of every frame after the start
 
@@ -232,8 +235,7 @@ def test_extent_correction_keeps_the_scale_up_with_a_growing_aircraft():
     """A 4x approach from the first polygon: without the foreground the estimate lags (0.74-0.83 of the
     true scale at the stop on this scene), with it the lag is gone (medians 1.00-1.05 under the Haswell,
     Sandybridge, Prescott and SkylakeX BLAS kernels). Medians over 5 tracker seeds."""
-    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
-                                growth=4.0, turn_deg=20.0, difficulty=1)
+    config = APPROACH
     without = np.median([stop_scale_ratio(config, 100, 0.0, s) for s in range(5)])
     with_fg = np.median([stop_scale_ratio(config, 100, 0.3, s) for s in range(5)])
     assert with_fg > without + 0.1
@@ -537,8 +539,7 @@ def test_the_loose_box_aspect_is_not_held_to_the_stop():
     Haswell / Prescott / Sandybridge / SkylakeX: defaults 0.110-0.130, held 0.208-0.249). (Session 8's form of this
     test, the silhouette prior without the re-fit at the single stop frame, was a knife edge: 0.09-0.19 by kernel;
     that prior overshoots the aspect late, +0.11-0.23.)"""
-    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
-                                growth=4.0, turn_deg=20.0, difficulty=1)
+    config = APPROACH
     frames, quads = scene_frames(config, 100)
     # rotation_gain 0 (the default): with the turn at 0.3 the late aspect error here is 0.21 (unset kernel, this
     # machine), as large as the held one: docs/docking_tracker.md's session-11 section says so
@@ -588,8 +589,7 @@ def test_row_offsets_keep_a_smooth_skys_bands_out_of_the_late_silhouette():
     merge with the fin and the wing tips and the silhouette runs off the search grid, so the extent is not
     measured on most late frames (tuning scenes 100, 103, 106: 23-30 of 67), and is 1.15-1.3 times too wide
     when it is. With the rows' offsets removed: 53-65 of 67, width 1.05-1.10."""
-    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
-                                growth=4.0, turn_deg=20.0, difficulty=1)
+    config = APPROACH
     frames, quads = scene_frames(config, 100)
     n_off, width_off = _measured_late(frames, quads, False)
     n_on, width_on = _measured_late(frames, quads, True)
@@ -641,8 +641,7 @@ def test_the_estimate_turns_with_the_aircraft_to_the_silhouettes_axis():
     stop: the appearance learnt on the turned aircraft keeps choosing the turned particles), while X̂
     turned part of the way to each measured frame's silhouette axis (rotation_gain) follows it to within
     about 1 deg. Medians over 3 tracker seeds."""
-    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
-                                growth=4.0, turn_deg=20.0, difficulty=1)
+    config = APPROACH
     off = np.median([late_rotation_error(config, 100, 0.0, s, learn_rotation="estimate") for s in range(3)])
     on = np.median([late_rotation_error(config, 100, 0.3, s, learn_rotation="estimate") for s in range(3)])
     assert on < 4.0 and on < off - 4.0, (off, on)
@@ -654,8 +653,7 @@ def test_the_model_learnt_at_the_silhouettes_rotation_turns_the_estimate_with_th
     rotation 0.75) and X̂ stays about 10 deg turned. Learnt at the silhouette's axis instead (learn_rotation
     silhouette; X̂ itself not turned), the model prefers the aircraft's rotation and the particles follow it
     (probe: 0.5-1 deg late). Medians over 3 tracker seeds."""
-    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
-                                growth=4.0, turn_deg=20.0, difficulty=1)
+    config = APPROACH
     off = np.median([late_rotation_error(config, 100, 0.0, s, learn_rotation="estimate") for s in range(3)])
     on = np.median([late_rotation_error(config, 100, 0.0, s, learn_rotation="silhouette") for s in range(3)])
     assert on < 4.0 and on < off - 4.0, (off, on)
@@ -788,8 +786,7 @@ def test_a_restart_on_a_box_too_large_is_shrunk_to_the_silhouette():
     silhouette is then 0.5-0.6x X̂'s sides, outside the usual 0.6-1.5x, so at ``restart_extent_low`` 0.6 it is
     never measured and X̂ stays +0.5 log too large for 40 frames; at 0.4 (the default) the first measurements
     are taken and the scale is right within 0.06 log (medians over 3 tracker seeds; at 2x the box, 2 of 3)."""
-    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
-                                growth=4.0, turn_deg=20.0, difficulty=1)
+    config = APPROACH
     frames, quads = scene_frames(config, 100, count=70)
     usual = np.median([scale_after_loose_restart(frames, quads, s, restart_extent_low=0.6) for s in range(3)])
     wide = np.median([scale_after_loose_restart(frames, quads, s, restart_extent_low=0.4) for s in range(3)])
@@ -802,8 +799,7 @@ def test_a_restart_on_a_box_too_small_grows_to_the_silhouette():
     the fuselage when the pale wings are lost against a low sun: tuning scene 152). The silhouette is then about
     1.8x X̂'s sides: at ``restart_extent_high`` 1.5 never measured, X̂ stays too small; at 2.0 (the default) it
     grows to the aircraft (medians over 3 tracker seeds)."""
-    config = DockingSceneConfig(width=640, height=480, frames=150, weather="clear", occluder="none",
-                                growth=4.0, turn_deg=20.0, difficulty=1)
+    config = APPROACH
     frames, quads = scene_frames(config, 100, count=70)
     usual = np.median([scale_after_loose_restart(frames, quads, s, grow=0.55, restart_extent_high=1.5)
                        for s in range(3)])
