@@ -29,7 +29,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench", "bench.*", "tools", "tools.*"]),
-    package_data={"multi_target_tracker": ["models/*.json", "models/*.npz", "models/*.xml"]},
+    package_data={"multi_target_tracker": ["models/*.json", "models/*.npz", "models/*.xml", "models/*.onnx"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -45,6 +45,9 @@ verifier a ``box_regressor`` moves the boxes of the groups of at least ``min_nei
 (before containment; measured on the drone-view prefix folds by ``bench/detector.py --box-regression``).
 A box regressor with image stages (``box_regression.ImageStage``) then moves the verified groups' boxes again
 from what the colour image shows around them; it needs the verifier (colour images).
+A ``patch_net`` (:mod:`patch_net`, also after a verifier) reads each group's colour patch around its box: its log
+odds are added to the verifier's before ``verifier_threshold`` applies, and its box replaces the group's (the box
+regressor's image stages are then not used).
 On the drone-view tiles this grouping, against keeping the best window of each cluster, took
 detection at <= 10 % false alarms from 70 % to 91 % with the same cascade (bench/README.md).
 """
@@ -68,6 +71,7 @@ from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, Cascad
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
 from multi_target_tracker.heading import turned_canvas
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
+from multi_target_tracker.patch_net import PatchNet, PatchNetError
 from multi_target_tracker.verifier import TreeVerifier, Verifier, VerifierError, features, load_verifier_model
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -165,6 +169,11 @@ class DetectorConfig:
                                "cascade backend only (the UAV set-up's, after its verifier); a model with image "
                                "stages then moves the groups the verifier accepts again, from the colour image "
                                "around each box (needs the verifier)")
+    patch_net: str = param("", "patch network of the groups (JSON header of an ONNX graph; a bare name is looked up in "
+                           "multi_target_tracker/models; empty: none): a small CNN reads each group's colour patch "
+                           "around its box (after the box regressor's member statistics), its log odds are added to "
+                           "the verifier's before verifier_threshold applies and its box is published, cut to the "
+                           "frame (the box regressor's image stages are then skipped); needs the verifier")
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -215,6 +224,13 @@ class DetectorConfig:
         if regressor is not None and regressor.image_stages and not self.verifier:
             raise ConfigError(f"box regressor {self.box_regressor!r} reads the image (image stages): it needs the "
                               "verifier (colour images)", ("box_regressor", "verifier"))
+        if self.patch_net and not self.verifier:
+            raise ConfigError("a patch network adds to the verifier's log odds: it needs the verifier",
+                              ("patch_net", "verifier"))
+        try:
+            load_patch_net(self)
+        except (DetectorError, PatchNetError) as exc:
+            raise ConfigError(f"patch network {self.patch_net!r}: {exc}", ("patch_net",)) from None
         for_models = regressor.info.get("for_models") if regressor is not None else None
         if for_models and Path(self.model).name not in for_models:   # its offsets fit those models' windows only
             raise ConfigError(f"box regressor {self.box_regressor!r} was trained for {', '.join(for_models)}, not "
@@ -285,6 +301,14 @@ def load_box_regressor(cfg: DetectorConfig) -> BoxRegressor | None:
     if not cfg.box_regressor:
         return None
     return _cached(resolve_model(cfg.box_regressor), BoxRegressor.load)
+
+
+def load_patch_net(cfg: DetectorConfig) -> PatchNet | None:
+    """The patch network of ``cfg`` (None when ``cfg.patch_net`` is empty). Not cached: an OpenCV network keeps its
+    input and outputs between calls, so each detector has its own (a few ms to load)."""
+    if not cfg.patch_net:
+        return None
+    return PatchNet.load(resolve_model(cfg.patch_net))
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -615,7 +639,8 @@ class Detector:
         try:
             self.verifier = load_verifier(cfg) if self.cascade is not None else None
             self.box_regressor = load_box_regressor(cfg) if self.cascade is not None else None
-        except (VerifierError, BoxRegressorError) as exc:
+            self.patch_net = load_patch_net(cfg) if self.verifier is not None else None
+        except (VerifierError, BoxRegressorError, PatchNetError) as exc:
             raise DetectorError(str(exc)) from None
 
     @property
@@ -738,7 +763,7 @@ class Detector:
     def candidates(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
         """Every group of at least ``min_neighbors`` windows before the verifier decides: ``(boxes, log odds)``,
         the boxes refined by the box regressor's member statistics if one is configured (before its image stages
-        and ``box_scale``)."""
+        and ``box_scale``); with a patch network its boxes and the log odds summed."""
         return self._candidates(bgr, windows, margin_floor)[:2]
 
     def _candidates(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
@@ -747,6 +772,9 @@ class Detector:
                                                                                    bgr.shape[1::-1])
         colour_box = refined if self.verifier.colour_box == "refined" else group_boxes
         logit = self.verifier.logit(features(bgr, colour_box, counts, margin_sums, best))
+        if self.patch_net is not None and len(refined):
+            patch_logit, refined = self.patch_net.predict(bgr, refined)
+            logit = logit + patch_logit
         return refined, logit, regression
 
     def _regressed(self, windows: Windows, frame_size: tuple[int, int], margin_floor: float):
@@ -772,7 +800,7 @@ class Detector:
         band = cfg.low_confidence_band
         accepted = logit >= cfg.verifier_threshold - band
         group_boxes, logit = group_boxes[accepted], logit[accepted]
-        if regression is not None and self.box_regressor.image_stages:
+        if regression is not None and self.box_regressor.image_stages and self.patch_net is None:
             group_boxes = self.box_regressor.refine_image(bgr, group_boxes, regression[accepted])
         scores = expit(logit)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)

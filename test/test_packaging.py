@@ -104,8 +104,9 @@ def test_colcon_build_installs_what_ros2_run_and_the_nodes_look_for(tmp_path):
         {p.name for p in (REPO / "config").glob("*.yaml")}
     assert {p.name for p in (prefix / "lib/aircraft_docking_tracker").iterdir()} == set(console_scripts())
     site = next(prefix.glob("lib/python3*/site-packages"))
-    assert {p.name for p in (site / "multi_target_tracker/models").glob("*.json")} == \
-        {p.name for p in (REPO / "multi_target_tracker/models").glob("*.json")}
+    for kind in ("*.json", "*.onnx"):      # the patch network's ONNX graph beside its JSON header
+        assert {p.name for p in (site / "multi_target_tracker/models").glob(kind)} == \
+            {p.name for p in (REPO / "multi_target_tracker/models").glob(kind)}
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
                AMENT_PREFIX_PATH=os.pathsep.join([str(prefix), os.environ.get("AMENT_PREFIX_PATH", "")]))
     probe = subprocess.run([sys.executable, "-c", "import aircraft_docking_tracker as a, multi_target_tracker as m;"

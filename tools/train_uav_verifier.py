@@ -47,8 +47,8 @@ from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccum
 from aircraft_docking_tracker.geometry import box_iou, scale_boxes  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
-    UAV_BEFORE_BLOBS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene, UavSceneConfig,
-    detection_truth)
+    UAV_BEFORE_BLOBS, UAV_BEFORE_PATCH_NET, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS, UAV_TUNING_SEEDS, UavScene,
+    UavSceneConfig, detection_truth)
 from multi_target_tracker.box_regression import member_features  # noqa: E402
 from multi_target_tracker.detector import (  # noqa: E402
     MODELS_DIR, Detector, DetectorConfig, members_stats, suppress_contained)
@@ -88,8 +88,11 @@ def parse_overrides(items: list[str]) -> dict:
 
 
 def setup_detector(overrides: dict | None = None) -> Detector:
-    """The set-up's detector (config/uav_camera.yaml's) with ``overrides``."""
-    detector = build_processor("detector", package_config_dir() / SETUP, overrides or {}).detector
+    """The set-up's detector (config/uav_camera.yaml's) as it was before its patch network (``UAV_BEFORE_PATCH_NET``:
+    the tools train the second stages of that set-up, the patch network learns from its candidates) with
+    ``overrides``."""
+    detector = build_processor("detector", package_config_dir() / SETUP,
+                               {**UAV_BEFORE_PATCH_NET, **(overrides or {})}).detector
     if detector is None:
         raise SystemExit(f"{SETUP} with {overrides}: the detector cannot be built")
     return detector
