@@ -25,7 +25,8 @@
   minus false alarms, pooled) and applied unchanged to the evaluation seeds; also each one's AP and its
   detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
-  side by side in this run: the set-up (its size range from the known altitude) against the same set-up with
+  side by side in this run: the set-up (its size range from the known altitude) against the same set-up without
+  its patch network (``BEFORE_PATCH_NET``, the set-up of sessions 39-42), with
   its windows grouped by their upright boxes (``UPRIGHT_GROUPS``, the set-up before session 39), without
   the colour blobs' views (``BEFORE_BLOBS``, the set-up before them), the same
   model scanning every window size that fits the frame, the same cascade without the colour verifier
@@ -65,7 +66,7 @@ from aircraft_docking_tracker.object_table import confident_rows  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_UPRIGHT as UPRIGHT,
-    UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
+    UAV_BEFORE_PATCH_NET as BEFORE_PATCH_NET, UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
     UavSceneConfig, detection_truth)
 from multi_target_tracker.detector import Detector, DetectorConfig, members_stats, suppress_contained  # noqa: E402
@@ -302,6 +303,7 @@ def main() -> int:
     previous = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **PREVIOUS}))
     before_blobs = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **BEFORE_BLOBS}))
     upright_groups = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **UPRIGHT_GROUPS}))
+    before_patch_net = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **BEFORE_PATCH_NET}))
     cascade_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **CASCADE_ONLY}))
     verifier_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **VERIFIER_ONLY}))
     logistic = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **LOGISTIC}))
@@ -310,7 +312,7 @@ def main() -> int:
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
-               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "upright_groups": [], "before_blobs": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
+               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "before_patch_net": [], "upright_groups": [], "before_blobs": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
                "other_seed_model": args.other_seed_model}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
@@ -322,6 +324,7 @@ def main() -> int:
         results["seeds"].append({"seed": seed, "difficulty": difficulty})
         results["setup_results"].append(run(det, items))
         results["full_pyramid"].append(run(full, items[::4]))      # speed and false alarms without the size prior
+        results["before_patch_net"].append(run(before_patch_net, items))
         results["upright_groups"].append(run(upright_groups, items))
         results["before_blobs"].append(run(before_blobs, items))
         results["cascade_only"].append(run(cascade_only, items))
@@ -336,13 +339,14 @@ def main() -> int:
         r = results["setup_results"][-1]
         print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
               f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
-    for key in ("setup_results", "full_pyramid", "upright_groups", "before_blobs", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
+    for key in ("setup_results", "full_pyramid", "before_patch_net", "upright_groups", "before_blobs", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
         if results[key]:
             results[key + "_summary"] = spread(results[key])
     # group confidences of the verifier's groups as they were compared (mean boxes, box_scale 0.9)
     results["confidences"] = confidence_summary(confidence_runs(verifier_only, TUNING),
                                                 confidence_runs(verifier_only, seeds))
-    results["misses"] = {"tuning": miss_breakdown({"setup": det, "before_blobs": before_blobs, "logistic": logistic, "verifier_only": verifier_only}, TUNING)}
+    results["misses"] = {"tuning": miss_breakdown({"setup": det, "before_patch_net": before_patch_net,
+                                                    "before_blobs": before_blobs, "logistic": logistic, "verifier_only": verifier_only}, TUNING)}
     results["setup_results_difficulty_1_summary"] = spread(
         [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
     (HERE / "results").mkdir(exist_ok=True)
@@ -392,6 +396,9 @@ def markdown(results: dict) -> str:
              line("same model, every window size (no altitude prior; every 4th frame)", full),
              *([line(f"same recipe, another training seed ({Path(results['other_seed_model']).name})",
                      results["other_seed_summary"])] if "other_seed_summary" in results else []),
+             *([line("without the patch network (the box regressor's image stages place the boxes, the tree verifier "
+                     "alone at threshold 1.9: the set-up of sessions 39-42)",
+                     results["before_patch_net_summary"])] if "before_patch_net_summary" in results else []),
              *([line("windows grouped by their upright boxes (the set-up before session 39)",
                      results["upright_groups_summary"])] if "upright_groups_summary" in results else []),
              *([line("without the colour blobs' views (the scan's windows alone: the set-up before session 33)",

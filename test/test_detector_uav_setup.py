@@ -16,7 +16,7 @@ from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccum
 from aircraft_docking_tracker.object_table import LOW_CONFIDENCE, confident_rows
 from aircraft_docking_tracker.offline import build_processor
 from aircraft_docking_tracker.scenarios.uav import (
-    UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_MEMBER_BOXES as MEMBER_BOXES,
+    UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_BEFORE_PATCH_NET as BEFORE_PATCH_NET, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_MEMBER_BOXES as MEMBER_BOXES,
     UAV_UPRIGHT as UPRIGHT, UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS,
     UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
@@ -179,8 +179,9 @@ def test_the_colour_blobs_views_find_more_vehicles_on_held_out_scenes(detector, 
     still carry the set-up's MOTA (0.631 against 0.587 without them, 7 of 8 seeds; docs/uav_camera.md), so here they
     need only find as many within noise."""
     assert detector.config.blob_views and detector.config.group_shape == "turned"
+    measured = Detector(dataclasses.replace(detector.config, **BEFORE_PATCH_NET))     # the set-up it was measured in
     upright = Detector(dataclasses.replace(detector.config, **UPRIGHT_GROUPS))
-    for with_blobs, grouped_as_then in ((detector, False), (upright, True)):
+    for with_blobs, grouped_as_then in ((measured, False), (upright, True)):
         before = Detector(dataclasses.replace(detector.config, **{**BEFORE_BLOBS,
                                                                   "group_shape": with_blobs.config.group_shape}))
         assert not before.config.blob_views and before.config.group_shape == with_blobs.config.group_shape
@@ -199,9 +200,10 @@ def test_grouping_by_turned_rectangles_keeps_the_detections_on_held_out_scenes(d
     against 0.512, 8 scenes better, 3 worse); on these four the detector alone moves by a vehicle or two (measured
     138 of 192 vehicles in 149 detections, false alarms 0.074, against 137 in 153, 0.105), so this checks that it
     finds as many vehicles within noise at no more false alarms."""
+    turned = Detector(dataclasses.replace(detector.config, **BEFORE_PATCH_NET))       # the set-up it was measured in
     upright = Detector(dataclasses.replace(detector.config, **UPRIGHT_GROUPS))
-    assert detector.config.group_shape == "turned" and upright.config.group_shape == "upright"
-    vehicles, detections, true = counts_of(detector).sum(axis=0)
+    assert turned.config.group_shape == "turned" and upright.config.group_shape == "upright"
+    vehicles, detections, true = counts_of(turned).sum(axis=0)
     u_vehicles, u_detections, u_true = counts_of(upright).sum(axis=0)
     assert vehicles == u_vehicles
     assert true >= u_true - 0.02 * vehicles, (true, u_true, vehicles)
@@ -209,11 +211,28 @@ def test_grouping_by_turned_rectangles_keeps_the_detections_on_held_out_scenes(d
                                                                                      u_detections)
 
 
+def test_the_patch_network_finds_more_vehicles_at_fewer_false_alarms_on_held_out_scenes(detector, counts_of):
+    """Side by side on the same held-out scenes: the patch network (session 43) reads each group's colour patch, adds
+    its log odds to the tree verifier's and places the box, against the set-up before it (the box regressor's image
+    stages, the trees alone; ``UAV_BEFORE_PATCH_NET``). Measured on these four scenes 148 of 192 vehicles in 162
+    detections (false alarms 0.086) against 138 in 149 (0.074); on bench/uav_tracking.py's 12 held-out scenes
+    0.825 / 0.098 against 0.768 / 0.118 (every 4th frame), tracking MOTA 0.590 against 0.538."""
+    before = Detector(dataclasses.replace(detector.config, **BEFORE_PATCH_NET))
+    assert detector.patch_net is not None and before.patch_net is None and before.box_regressor.image_stages
+    vehicles, detections, true = counts_of(detector).sum(axis=0)
+    b_vehicles, b_detections, b_true = counts_of(before).sum(axis=0)
+    assert vehicles == b_vehicles
+    assert true >= b_true + 0.025 * vehicles, (true, b_true, vehicles)
+    assert 1 - true / max(detections, 1) <= 1 - b_true / max(b_detections, 1) + 0.03, (true, detections, b_true,
+                                                                                     b_detections)
+
+
 def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_unchanged(detector, held_out_frames):
     """Groups the verifier scores within the band below its threshold are published flagged (their score, the
     verifier's probability, below the threshold's); the detections proper are the same with or without the band."""
+    band = 6.0        # wide: with the patch network the summed log odds seldom fall just below the threshold
     without = Detector(dataclasses.replace(detector.config, low_confidence_band=0.0))
-    banded = Detector(dataclasses.replace(detector.config, low_confidence_band=2.0))
+    banded = Detector(dataclasses.replace(detector.config, low_confidence_band=band))
     threshold = detector.config.verifier_threshold
     flagged = 0
     for image, _ in held_out_frames[HELD_OUT[0]][::2]:                     # every 16th frame
@@ -223,7 +242,7 @@ def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_uncha
         high = table[~low][list(plain.dtype.names)]
         assert high.tolist() == plain.tolist()
         logit = np.log(table["score"] / (1 - table["score"]))
-        assert (logit[low] < threshold + 1e-4).all() and (logit[low] >= threshold - 2.0 - 1e-4).all()
+        assert (logit[low] < threshold + 1e-4).all() and (logit[low] >= threshold - band - 1e-4).all()
         flagged += int(low.sum())
     assert flagged > 0
 
