@@ -101,7 +101,7 @@ def setup_detector(overrides: dict | None = None) -> Detector:
 def cascade_detector(overrides: dict | None = None) -> Detector:
     """The set-up's cascade alone, scanning as before the colour blobs' views (the shipped verifier and box
     regressor were trained on the scan's windows then); ``overrides`` last."""
-    return setup_detector({"verifier": "", "box_regressor": "", "low_confidence_band": 0.0, **UAV_BEFORE_BLOBS,
+    return setup_detector({**UAV_BEFORE_BLOBS, "verifier": "", "box_regressor": "", "low_confidence_band": 0.0,
                            **(overrides or {})})
 
 
