@@ -150,7 +150,10 @@ class PatchNet:
             raise PatchNetError(f"{graph}: does not run on a {size}x{size} patch ({str(exc).strip()})") from None
         return model
 
-    def header(self, onnx: str) -> dict:
-        """The JSON header of this network stored as ``onnx`` beside it."""
-        return {"format": PATCH_NET_FORMAT, "version": PATCH_NET_VERSION, "outputs": list(OUTPUTS), "onnx": onnx,
-                "size": self.size, "grow": self.grow, "info": self.info}
+
+
+def header(onnx: str, size: int, grow: float, info: dict) -> dict:
+    """The JSON header of a network of patch geometry ``size`` / ``grow`` stored as ``onnx`` beside it (what
+    :meth:`PatchNet.load` reads)."""
+    return {"format": PATCH_NET_FORMAT, "version": PATCH_NET_VERSION, "outputs": list(OUTPUTS), "onnx": onnx,
+            "size": size, "grow": grow, "info": info}

@@ -39,7 +39,7 @@ sys.path.insert(0, str(REPO / "tools"))
 
 from aircraft_docking_tracker.geometry import box_iou  # noqa: E402
 from multi_target_tracker.detector import MODELS_DIR  # noqa: E402
-from multi_target_tracker.patch_net import OUTPUTS, PatchNet, encode_boxes, patches, square_regions  # noqa: E402
+from multi_target_tracker.patch_net import OUTPUTS, PatchNet, encode_boxes, header, patches, square_regions  # noqa: E402
 from train_uav_verifier import parse_overrides, scene_frames, setup_detector, training_scenes  # noqa: E402
 
 SIZE = 48          # patch side [px]
@@ -157,7 +157,7 @@ def main() -> int:
         raise SystemExit("this tool needs PyTorch (pip install torch); the package itself does not") from None
     torch.set_num_threads(args.threads)
     cv2.setNumThreads(1)
-    det = setup_detector({**parse_overrides(args.set), "patch_net": ""})
+    det = setup_detector(parse_overrides(args.set))        # the set-up before the patch network
     scenes = training_scenes(args.train_scenes)
     cache = Path(args.samples) if args.samples else None
     if cache is not None and cache.is_file():
@@ -180,8 +180,7 @@ def main() -> int:
             "verifier": Path(det.config.verifier).name, "box_regressor": Path(det.config.box_regressor).name,
             "min_neighbors": det.config.min_neighbors, "window_margin": det.config.window_margin,
             "command": "python tools/train_uav_patch_net.py " + " ".join(sys.argv[1:])}
-    model = PatchNet(None, SIZE, GROW, info)
-    out.write_text(json.dumps(model.header(onnx.name), indent=1) + "\n")
+    out.write_text(json.dumps(header(onnx.name, SIZE, GROW, info), indent=1) + "\n")
     PatchNet.load(out)           # the graph runs in OpenCV as the detector will run it
     print(f"wrote {out} and {onnx}: {info['vehicles']} vehicle / {info['background']} background groups "
           f"({info['left_out']} left out)")
