@@ -407,7 +407,7 @@ def regressed_summary(config: DetectorConfig, fold_groups: list, regressor, min_
         b, sc = gboxes[big], counts[big] + 1.0 / (1.0 + np.exp(-best[big]))
         if regressor is not None and len(b):
             b = regressor.refine(b, feats[big])
-        keep = suppress_contained(b, sc, config.containment, config.max_detections)
+        keep = suppress_contained(b, sc, config.containment, config.max_detections, config.suppression_iou)
         acc.add_frame(b[keep], sc[keep], gt, cut)
     return acc.summary()
 

@@ -173,7 +173,7 @@ def confidence_runs(det: Detector, seeds: list[tuple[int, int]]) -> dict:
         for gray, boxes, ignore, _ in frames_of(seed, difficulty, UAV_SETUP_GROUND_RESOLUTION):
             group_boxes, confidences = group_confidences(det, gray)
             for name, conf in confidences.items():
-                keep = suppress_contained(group_boxes, conf, det.config.containment)
+                keep = suppress_contained(group_boxes, conf, det.config.containment, iou=det.config.suppression_iou)
                 accs.setdefault(name, DetectionAccumulator()).add_frame(group_boxes[keep], conf[keep], boxes, ignore)
         for name, acc in accs.items():
             out.setdefault(name, []).append((np.asarray(acc.scores), np.asarray(acc.is_tp, bool), acc.n_gt))

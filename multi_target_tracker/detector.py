@@ -35,6 +35,8 @@ that overlap by far more than the vehicles do, and their windows would fall into
 Groups with fewer than ``min_neighbors`` windows are dropped, then every group lying at least
 ``containment`` inside a better one (intersection over the smaller area) is suppressed: vehicles
 seen from above or an aircraft on a stand do not overlap, but a window on half a car does.
+``suppression_iou`` < 1 also drops a group overlapping a better one by that IoU (greedy non-maximum
+suppression); with ``containment`` 1 it keeps overlapping objects that containment would merge.
 Last, ``box_scale`` scales each box about its centre: a cascade trained on object-centred boxes
 also passes windows a little inside the object (their texture is the object's), so the mean
 window can sit inside it; the UAV set-up calibrates this on its tuning scenes.
@@ -146,6 +148,8 @@ class DetectorConfig:
                                "for the shipped drone-view model)", low=1, high=100)
     containment: float = param(0.4, "drop a group lying this much inside a better one (intersection over the "
                                "smaller box; 1: never)", low=0.0, high=1.0)
+    suppression_iou: float = param(1.0, "also drop a group overlapping a better one by this IoU (non-maximum "
+                                   "suppression; 1: never)", low=0.0, high=1.0)
     window_margin: float = param(-0.5, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
                                  "windows, >0 fewer; default chosen by k-fold by video for the shipped drone-view "
                                  "model)", low=-100.0, high=100.0)
@@ -429,20 +433,22 @@ def merge_levels(levels: list, with_vectors: bool):
 
 
 def suppress_contained(boxes: np.ndarray, scores: np.ndarray, containment: float,
-                       limit: int | None = None) -> np.ndarray:
+                       limit: int | None = None, iou: float = 1.0) -> np.ndarray:
     """Indices of the boxes kept, best score first, dropping each box lying ``containment`` inside a
-    better kept one (intersection over the smaller box's area); at most ``limit``."""
+    better kept one (intersection over the smaller box's area) or overlapping one by ``iou`` (intersection over
+    union: greedy non-maximum suppression); at most ``limit``."""
     order = np.argsort(-np.asarray(scores, np.float64), kind="stable")
     limit = len(order) if limit is None else limit
-    if containment >= 1.0 or len(order) < 2:
+    if (containment >= 1.0 and iou >= 1.0) or len(order) < 2:
         return order[:limit]
     boxes = np.ascontiguousarray(np.asarray(boxes, np.float64).reshape(-1, 4))
-    return _suppress_contained(boxes, order.astype(np.int64), float(containment), int(limit))
+    return _suppress_contained(boxes, order.astype(np.int64), float(containment), int(limit), float(iou))
 
 
 @numba.njit(cache=True, nogil=True)
-def _suppress_contained(boxes, order, containment, limit):
-    """Greedy containment suppression over ``order`` (compiled: the kept boxes are few, the loop is O(n k))."""
+def _suppress_contained(boxes, order, containment, limit, iou):
+    """Greedy containment and overlap suppression over ``order`` (compiled: the kept boxes are few, the loop is
+    O(n k)); a ratio of 1 never drops a box."""
     kept = np.empty(min(len(order), max(limit, 0)), np.int64)
     n_kept = 0
     for k in order:
@@ -454,7 +460,8 @@ def _suppress_contained(boxes, order, containment, limit):
             b = kept[i]
             bx, by, bw, bh = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
             inter = max(min(ax + aw, bx + bw) - max(ax, bx), 0.0) * max(min(ay + ah, by + bh) - max(ay, by), 0.0)
-            if inter / max(min(aw * ah, bw * bh), 1e-12) >= containment:
+            if (containment < 1.0 and inter / max(min(aw * ah, bw * bh), 1e-12) >= containment) or \
+                    (iou < 1.0 and inter / max(aw * ah + bw * bh - inter, 1e-12) >= iou):
                 inside = True
                 break
         if not inside:
@@ -600,18 +607,19 @@ def members_stats(boxes: np.ndarray, margins: np.ndarray, label: np.ndarray, see
 
 def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3, min_neighbors: int = 3,
                   containment: float = 0.4, max_detections: int = 500,
-                  quads: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  quads: np.ndarray | None = None, suppression_iou: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Raw windows ``(n, 4)`` and their last-stage margins -> grouped ``(boxes, scores)``, best first.
 
     See the module docstring: mean box per group, score = windows in the group + logistic of the best
-    margin, groups smaller than ``min_neighbors`` dropped, contained groups suppressed. With ``quads`` the
+    margin, groups smaller than ``min_neighbors`` dropped, contained (or ``suppression_iou`` overlapping) groups
+    suppressed. With ``quads`` the
     windows are grouped by the overlap of their turned rectangles (:func:`group_members`).
     """
     group_boxes, counts, _, best = group_stats(boxes, margins, group_iou, min_count=min_neighbors, quads=quads)
     if len(counts) == 0:
         return np.zeros((0, 4)), np.zeros(0)
     group_scores = counts + expit(best)
-    keep = suppress_contained(group_boxes, group_scores, containment, max_detections)
+    keep = suppress_contained(group_boxes, group_scores, containment, max_detections, suppression_iou)
     return group_boxes[keep], group_scores[keep]
 
 
@@ -733,9 +741,9 @@ class Detector:
                                             cfg.window_margin if last_stage_margin is None else last_stage_margin)
         elif self.cascade is not None:
             boxes, scores = group_windows(boxes, scores, cfg.group_iou, cfg.min_neighbors, cfg.containment,
-                                          cfg.max_detections, self._group_quads(windows))
+                                          cfg.max_detections, self._group_quads(windows), cfg.suppression_iou)
         else:  # OpenCV grouped already (minNeighbors); the two orientations only need merging
-            keep = suppress_contained(boxes, scores, cfg.containment, cfg.max_detections)
+            keep = suppress_contained(boxes, scores, cfg.containment, cfg.max_detections, cfg.suppression_iou)
             boxes, scores = boxes[keep], scores[keep]
         out = np.zeros(len(boxes), DETECTION_DTYPE if low is None else FLAGGED_DETECTION_DTYPE)
         if low is not None:
@@ -785,7 +793,7 @@ class Detector:
         if not len(group_boxes):
             return np.zeros((0, 4)), np.zeros(0)
         scores = counts + expit(best)
-        keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
+        keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections, cfg.suppression_iou)
         return group_boxes[keep], scores[keep]
 
     def _verified(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
@@ -803,7 +811,7 @@ class Detector:
         if regression is not None and self.box_regressor.image_stages and self.patch_net is None:
             group_boxes = self.box_regressor.refine_image(bgr, group_boxes, regression[accepted])
         scores = expit(logit)
-        keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections)
+        keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections, cfg.suppression_iou)
         return group_boxes[keep], scores[keep], (logit[keep] < cfg.verifier_threshold) if band > 0 else None
 
     def verified(self, bgr: np.ndarray, windows: Windows, margin_floor: float):

@@ -19,17 +19,19 @@ def _containment_reference(a, b):
     return inter / np.maximum(smaller, 1e-12)
 
 
-def suppress_reference(boxes, scores, containment, limit=None):
-    """The former O(n^2) Python loop."""
+def suppress_reference(boxes, scores, containment, limit=None, iou=1.0):
+    """The former O(n^2) Python loop, with greedy IoU suppression beside containment."""
     order = np.argsort(-scores, kind="stable")
     limit = len(order) if limit is None else limit
-    if containment >= 1.0 or len(order) < 2:
+    if (containment >= 1.0 and iou >= 1.0) or len(order) < 2:
         return order[:limit]
     kept = []
     for k in order:
         if len(kept) >= limit:
             break
-        if not kept or not (_containment_reference(boxes[k:k + 1], boxes[kept])[0] >= containment).any():
+        inside = containment < 1.0 and (_containment_reference(boxes[k:k + 1], boxes[kept])[0] >= containment).any()
+        overlapping = iou < 1.0 and (box_iou(boxes[k:k + 1], boxes[kept]) >= iou).any()
+        if not kept or not (inside or overlapping):
             kept.append(int(k))
     return np.asarray(kept, int)
 
@@ -98,6 +100,20 @@ def test_grouping_matches_the_python_loop_on_random_boxes(seed):
         for limit in (None, 7):
             assert suppress_contained(boxes, scores, settings["containment"], limit).tolist() == \
                 suppress_reference(boxes, scores, settings["containment"], limit).tolist()
+            for iou in (0.0, 0.3, 0.6):
+                assert suppress_contained(boxes, scores, settings["containment"], limit, iou).tolist() == \
+                    suppress_reference(boxes, scores, settings["containment"], limit, iou).tolist()
+
+
+def test_overlap_suppression_keeps_overlapping_neighbours_that_containment_drops():
+    """Two vehicles parked nose over tail (IoU 0.27, half the smaller inside the larger) and a second box on the
+    first (IoU 0.81): containment 0.5 drops the neighbour with the duplicate, IoU 0.5 drops the duplicate only."""
+    boxes = np.array([[0.0, 0.0, 40.0, 80.0], [10.0, 40.0, 40.0, 60.0], [2.0, 4.0, 40.0, 76.0]])
+    scores = np.array([0.9, 0.8, 0.7])
+    assert box_iou(boxes[0], boxes[2]) > 0.8 and box_iou(boxes[0], boxes[1]) < 0.3
+    assert suppress_contained(boxes, scores, 0.5).tolist() == [0]
+    assert suppress_contained(boxes, scores, 1.0, iou=0.5).tolist() == [0, 1]
+    assert suppress_contained(boxes, scores, 1.0).tolist() == [0, 1, 2]      # both 1: nothing dropped
 
 
 @pytest.mark.parametrize("angle", [45.0, -30.0, 135.0])

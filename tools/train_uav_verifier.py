@@ -168,7 +168,8 @@ def swept_point(det: Detector, seeds, min_neighbors: list[int], max_false_alarms
             for (group_boxes, logit), truth, ignore in candidates:
                 accepted = logit >= threshold
                 kept_boxes, scores = group_boxes[accepted], expit(logit[accepted])
-                keep = suppress_contained(kept_boxes, scores, cfg.containment, cfg.max_detections)
+                keep = suppress_contained(kept_boxes, scores, cfg.containment, cfg.max_detections,
+                                          cfg.suppression_iou)
                 acc.add_frame(scale_boxes(kept_boxes[keep], cfg.box_scale), scores[keep], truth, ignore)
             s = acc.summary()
             point = {"min_neighbors": n, "verifier_threshold": round(float(threshold), 3),
