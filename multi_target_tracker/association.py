@@ -47,8 +47,11 @@ Beyond the seed, each selectable (``bench/association.py`` measures each one):
   prediction is trusted: at most ``coast_output_frames`` misses and a position std
   ``sqrt(P_xx)`` of at most ``coast_output_std`` box heights. Past that it coasts unpublished
   (state 4): still predicted and associated, so it comes back with its ID, but not output, so a
-  drifting prediction is not a false positive. Every state stays in :class:`Tracks` (and the
-  node's ``tracks`` table); :meth:`Tracks.visible` is what is published (states 1 and 2).
+  drifting prediction is not a false positive. On a frame the detector skipped
+  (:meth:`MultiTargetTracker.predicted`) a target detected on its last frame has its own limit,
+  ``fill_output_std``: nobody looked for it there, so a wider uncertainty is no evidence that it
+  has gone. Every state stays in :class:`Tracks` (and the node's ``tracks`` table);
+  :meth:`Tracks.visible` is what is published (states 1 and 2).
 * Growing gates (issue 13, ``kalman.missed_update="none"``): a missed target is only predicted,
   so its covariance and with it the Mahalanobis gate grow with every missed frame, and a target
   reappearing after a long hide off its constant-velocity path is still inside its own gate. The
@@ -149,6 +152,10 @@ class AssociationConfig:
     coast_output_std: float = param(0.1, "... and only while its position std sqrt(P_xx) is at most this many box "
                                     "heights (needs kalman.missed_update='none': otherwise P shrinks while coasting)",
                                     low=0.0, high=1e6)
+    fill_output_std: float = param(0.1, "on a frame the detector skipped (predicted(), the node's "
+                                   "output.fill_skipped_frames) a target detected on its last frame is published while "
+                                   "its position std is at most this many box heights (a missed one: coast_output_std)",
+                                   low=0.0, high=1e6)
     cascade: bool = param(False, "first pass in two stages: targets seen recently first, then those coasting "
                           "unpublished (state 4) on the detections left (DeepSORT's matching cascade, two levels)")
     confirm_first_frame: bool = param(True, "detections of the first frame (or the first after a reset) start "
@@ -165,7 +172,8 @@ def seed_config(**overrides) -> AssociationConfig:
     """Seed 003 §3 as written: c_t gate on the matrix-normalised cost, l_t = 15, f_t = 10, nothing added."""
     values = dict(gate="cost", cost_gate=0.3, confirm_length=15, max_misses=10, tentative_max_misses=10,
                   angle_weight=1.0, iou_weight=0.0, second_pass=False, reacquire_frames=0, cascade=False,
-                  confirm_first_frame=False, coast_output_frames=100000, coast_output_std=1e6)
+                  confirm_first_frame=False, coast_output_frames=100000, coast_output_std=1e6,
+                  fill_output_std=1e6)
     values.update(overrides)
     return validate(AssociationConfig(**values))
 
@@ -593,8 +601,9 @@ class MultiTargetTracker:
     def predicted(self, stamp: float) -> Tracks | None:
         """The tracks at ``stamp``, a frame after the last :meth:`step` that has no detections of its own (the
         detector skipped it), without changing anything: every filter predicted over ``T = stamp - last stamp``
-        (eq. 6). A published target is coasting (2) there while its predicted position is trusted
-        (``coast_output_std``), else unpublished (4); its missed counter stays (nobody looked at that frame).
+        (eq. 6). A published target is coasting (2) there while its predicted position is trusted (its position
+        std at most ``fill_output_std`` box heights if it was detected on the last frame, ``coast_output_std`` if it
+        was missed there), else unpublished (4); its missed counter stays (nobody looked at that frame).
         None when no frame was stepped yet or :meth:`step` at ``stamp`` would reset (stamp not after the last
         one, or more than ``max_frame_gap`` after it)."""
         if stamp != stamp or stamp in (float("inf"), float("-inf")):
@@ -605,7 +614,8 @@ class MultiTargetTracker:
         bank.predict(stamp - self.last_stamp)
         states = self.states.copy()
         published = np.isin(states, (CONFIRMED, COASTING))
-        trusted = np.sqrt(bank.cov[:, 0]) <= self.config.coast_output_std * bank.size[:, 1]
+        limit = np.where(self.misses == 0, self.config.fill_output_std, self.config.coast_output_std)
+        trusted = np.sqrt(bank.cov[:, 0]) <= limit * bank.size[:, 1]
         states[published] = np.where(trusted[published], COASTING, PREDICTED)
         return self._read_out(bank, states)
 

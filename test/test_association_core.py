@@ -445,11 +445,25 @@ def test_predicted_tracks_at_a_skipped_frame_change_nothing_and_follow_eq_6():
 
 
 def test_predicted_tracks_unpublish_an_untrusted_prediction():
-    """coast_output_std applies to the predicted position: a target whose position std would exceed it at the
-    skipped frame is not published there (state 4); tentative targets stay tentative."""
-    cfg = AssociationConfig(coast_output_std=0.1, confirm_first_frame=False, confirm_length=2)
+    """fill_output_std applies to the predicted position of a target detected on the last frame: one whose position
+    std would exceed it at the skipped frame is not published there (state 4); tentative targets stay tentative."""
+    cfg = AssociationConfig(fill_output_std=0.1, confirm_first_frame=False, confirm_length=2)
     tracker = MultiTargetTracker(cfg, KALMAN)
     run(tracker, [[box(50 + 4 * k, 50, 40, 40)] for k in range(3)] + [[box(62, 50, 40, 40), box(300, 300, 40, 40)]])
     near, far = tracker.predicted(3.2 / FPS), tracker.predicted(3 / FPS + 2.0)
     assert near.states.tolist() == [COASTING, TENTATIVE]
     assert far.states.tolist() == [PREDICTED, TENTATIVE]                  # 2 s on: std grew past 0.1 box heights
+
+
+def test_a_skipped_frame_holds_a_detected_target_to_fill_output_std_and_a_missed_one_to_coast_output_std():
+    """Half a second after the last frame (position std 0.49 box heights for the target detected there, 0.60 for the
+    one missed there): fill_output_std 1 keeps the detected target published, 0.1 does not; the missed one is held to
+    coast_output_std 0.3 either way. Nothing the frames with detections publish changes."""
+    frames = [[box(50 + 4 * k, 50, 40, 40), box(300, 300 + 4 * k, 40, 40)] for k in range(3)] + [[box(62, 50, 40, 40)]]
+    for fill, expected in ((1.0, [COASTING, PREDICTED]), (0.1, [PREDICTED, PREDICTED])):
+        cfg = AssociationConfig(coast_output_std=0.3, fill_output_std=fill, coast_output_frames=5,
+                                confirm_first_frame=False, confirm_length=2)
+        tracker = MultiTargetTracker(cfg, KALMAN)
+        run(tracker, frames)
+        assert tracker.tracks().states.tolist() == [CONFIRMED, COASTING] and tracker.misses.tolist() == [0, 1]
+        assert tracker.predicted(3 / FPS + 0.5).states.tolist() == expected, fill

@@ -119,7 +119,8 @@ def test_annotated_image_pairs_image_and_tracks_by_stamp():
 def test_skipped_frames_get_the_predicted_tracks_when_the_next_detections_arrive():
     """fill_skipped_frames: every camera frame gets tracks; a frame the detector skipped gets the tracks predicted to
     its stamp (coasting), with its own header, published before the next detections' tracks."""
-    trusting = dataclasses.replace(FAST, coast_output_std=1.0)       # 8-px boxes: 0.1 heights is below the noise
+    # 8-px boxes: 0.1 heights is below the noise
+    trusting = dataclasses.replace(FAST, coast_output_std=1.0, fill_output_std=1.0)
     proc = AssociationProcessor(trusting, output=AssociationOutputConfig(fill_skipped_frames=True))
     assert "image" in proc.inputs and "image" in proc.latest_only and "tracks/image" not in proc.outputs
     plain = AssociationProcessor(trusting)
@@ -195,7 +196,8 @@ def test_node_fills_the_frames_without_detections_over_ros():
     with ros_context() as (ctx, executor):
         node = AssociationNode(context=ctx, parameter_overrides=[
             Parameter("confirm_length", value=2), Parameter("gate", value="mahalanobis"),
-            Parameter("coast_output_std", value=1.0), Parameter("output.fill_skipped_frames", value=True)])
+            Parameter("coast_output_std", value=1.0), Parameter("fill_output_std", value=1.0),
+            Parameter("output.fill_skipped_frames", value=True)])
         probe = rclpy.create_node("probe", context=ctx)
         executor.add_node(node)
         executor.add_node(probe)
@@ -319,4 +321,7 @@ def test_bench_live_case_is_what_the_node_publishes():
         assert len(mine) == len(theirs) == 2
         for name in ("id", "x", "y", "w", "h", "state"):
             np.testing.assert_array_equal(mine[name], theirs[name])
-    assert (from_bench[1]["state"] == 4).all() and (from_bench[5]["state"] == 2).all()   # untrusted, then coasting
+    # skipped frames 1 and 5: coasting; frame 1's targets, one detection old, are trusted to the set-up's
+    # fill_output_std (0.3 box heights), not to coast_output_std's 0.1
+    assert (from_bench[1]["state"] == 2).all() and (from_bench[5]["state"] == 2).all()
+    assert node.tracker.config.fill_output_std > node.tracker.config.coast_output_std
