@@ -87,6 +87,15 @@ def test_grouping_matches_the_python_loop_on_real_tiles(shared_data, settings):
     assert total > 500   # the comparison saw real crowds of overlapping windows
 
 
+def test_detector_applies_its_suppression_iou(shared_data):
+    """The detector's own suppression reads ``suppression_iou``: IoU 0 keeps only the best detection of a tile that
+    has several, and a loose IoU keeps every one containment 1 keeps (the drone-view groups hardly overlap)."""
+    tiles = read_yolo_folder(shared_data / "detect" / "drone-view-vehicles", include=["1_"])
+    image = next(item.load() for item in tiles[::10] if len(Detector(DetectorConfig()).detect(item.load())) >= 3)
+    kept = {iou: len(Detector(DetectorConfig(containment=1.0, suppression_iou=iou)).detect(image)) for iou in (0.0, 1.0)}
+    assert kept[0.0] == 1 and kept[1.0] >= 3, kept
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_grouping_matches_the_python_loop_on_random_boxes(seed):
     rng = np.random.default_rng(seed)

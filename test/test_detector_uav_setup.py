@@ -247,6 +247,13 @@ def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_uncha
     assert flagged > 0
 
 
+def test_the_verified_detections_go_through_the_suppression_iou(detector, held_out_frames):
+    """The set-up's verified path (colour verifier, patch network) applies ``suppression_iou`` too: at IoU 0 one row
+    is left of a frame with several."""
+    image = next(image for image, _ in held_out_frames[HELD_OUT[0]] if len(detector.detect(image)) >= 2)
+    assert len(Detector(dataclasses.replace(detector.config, suppression_iou=0.0)).detect(image)) == 1
+
+
 def test_low_confidence_band_needs_a_verifier():
     with pytest.raises(ConfigError):
         validate(DetectorConfig(low_confidence_band=1.0))
