@@ -296,19 +296,17 @@ def main() -> int:
     det = setup_detector()
     det.detect(np.zeros((480, 640, 3), np.uint8))    # compile the scan before timing
     # no altitude prior: every window size from the model's own window up to the frame
-    full = Detector(from_mapping(DetectorConfig, {**_fields(det.config), "min_size": float(det.window[1]),
-                                                  "max_size": 1e4}))
+    full = variant(det, {"min_size": float(det.window[1]), "max_size": 1e4})
     former = Detector(DetectorConfig(**FORMER))
     upright = Detector(DetectorConfig(**UPRIGHT))
-    previous = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **PREVIOUS}))
-    before_blobs = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **BEFORE_BLOBS}))
-    upright_groups = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **UPRIGHT_GROUPS}))
-    before_patch_net = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **BEFORE_PATCH_NET}))
-    cascade_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **CASCADE_ONLY}))
-    verifier_only = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **VERIFIER_ONLY}))
-    logistic = Detector(from_mapping(DetectorConfig, {**_fields(det.config), **LOGISTIC}))
-    other = (Detector(from_mapping(DetectorConfig, {**_fields(det.config), "model": args.other_seed_model}))
-             if args.other_seed_model else None)
+    previous = variant(det, PREVIOUS)
+    before_blobs = variant(det, BEFORE_BLOBS)
+    upright_groups = variant(det, UPRIGHT_GROUPS)
+    before_patch_net = variant(det, BEFORE_PATCH_NET)
+    cascade_only = variant(det, CASCADE_ONLY)
+    verifier_only = variant(det, VERIFIER_ONLY)
+    logistic = variant(det, LOGISTIC)
+    other = variant(det, {"model": args.other_seed_model}) if args.other_seed_model else None
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
@@ -358,6 +356,11 @@ def main() -> int:
 
 def _fields(config: DetectorConfig) -> dict:
     return {k: getattr(config, k) for k in config.__dataclass_fields__}
+
+
+def variant(det: Detector, overrides: dict) -> Detector:
+    """A detector of ``det``'s configuration with ``overrides`` (an earlier set-up or a scan without the size prior)."""
+    return Detector(from_mapping(DetectorConfig, {**_fields(det.config), **overrides}))
 
 
 def markdown(results: dict) -> str:

@@ -612,8 +612,8 @@ def group_windows(boxes: np.ndarray, margins: np.ndarray, group_iou: float = 0.3
 
     See the module docstring: mean box per group, score = windows in the group + logistic of the best
     margin, groups smaller than ``min_neighbors`` dropped, contained (or ``suppression_iou`` overlapping) groups
-    suppressed. With ``quads`` the
-    windows are grouped by the overlap of their turned rectangles (:func:`group_members`).
+    suppressed. With ``quads`` the windows are grouped by the overlap of their turned rectangles
+    (:func:`group_members`).
     """
     group_boxes, counts, _, best = group_stats(boxes, margins, group_iou, min_count=min_neighbors, quads=quads)
     if len(counts) == 0:
