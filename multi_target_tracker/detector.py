@@ -48,8 +48,8 @@ verifier a ``box_regressor`` moves the boxes of the groups of at least ``min_nei
 A box regressor with image stages (``box_regression.ImageStage``) then moves the verified groups' boxes again
 from what the colour image shows around them; it needs the verifier (colour images).
 A ``patch_net`` (:mod:`patch_net`, also after a verifier) reads each group's colour patch around its box: its log
-odds are added to the verifier's before ``verifier_threshold`` applies, and its box replaces the group's (the box
-regressor's image stages are then not used).
+odds are added to the verifier's before ``verifier_threshold`` applies, and its box replaces the group's (so the
+configuration refuses a box regressor with image stages beside it: both would place the box).
 On the drone-view tiles this grouping, against keeping the best window of each cluster, took
 detection at <= 10 % false alarms from 70 % to 91 % with the same cascade (bench/README.md).
 """
@@ -177,7 +177,7 @@ class DetectorConfig:
                            "multi_target_tracker/models; empty: none): a small CNN reads each group's colour patch "
                            "around its box (after the box regressor's member statistics), its log odds are added to "
                            "the verifier's before verifier_threshold applies and its box is published, cut to the "
-                           "frame (the box regressor's image stages are then skipped); needs the verifier")
+                           "frame; needs the verifier and a box regressor without image stages (if any)")
     roi: list = param([0, 0, 0, 0], "region of interest x, y, w, h [px]; w or h 0 = whole frame")
     class_id: int = param(0, "class id written into each detection", low=0, high=1000000)
     max_detections: int = param(500, "keep at most this many detections (best scores)", low=1, high=100000)
@@ -231,6 +231,10 @@ class DetectorConfig:
         if self.patch_net and not self.verifier:
             raise ConfigError("a patch network adds to the verifier's log odds: it needs the verifier",
                               ("patch_net", "verifier"))
+        if self.patch_net and regressor is not None and regressor.image_stages:
+            raise ConfigError(f"box regressor {self.box_regressor!r} has image stages, and the patch network places "
+                              "the published boxes itself: use a box regressor of member statistics only (e.g. "
+                              "uav_vehicles_box_regressor.json) or no patch network", ("patch_net", "box_regressor"))
         try:
             load_patch_net(self)
         except (DetectorError, PatchNetError) as exc:
@@ -808,7 +812,7 @@ class Detector:
         band = cfg.low_confidence_band
         accepted = logit >= cfg.verifier_threshold - band
         group_boxes, logit = group_boxes[accepted], logit[accepted]
-        if regression is not None and self.box_regressor.image_stages and self.patch_net is None:
+        if regression is not None and self.box_regressor.image_stages:
             group_boxes = self.box_regressor.refine_image(bgr, group_boxes, regression[accepted])
         scores = expit(logit)
         keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections, cfg.suppression_iou)

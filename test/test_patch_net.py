@@ -147,6 +147,16 @@ def test_the_detector_config_refuses_a_patch_net_without_a_verifier_or_that_does
         Detector(DetectorConfig(verifier="uav_vehicles_verifier_trees.json", patch_net=str(bad)))
 
 
+def test_the_detector_config_refuses_a_patch_net_beside_a_box_regressor_with_image_stages():
+    """Both would place the published box: the configuration says which one does, rather than one being skipped."""
+    trees = "uav_vehicles_verifier_trees.json"
+    with pytest.raises(ConfigError, match="image stages") as refused:
+        validate(DetectorConfig(verifier=trees, patch_net=SHIPPED, box_regressor="uav_vehicles_box_regressor_image.json"))
+    assert set(refused.value.fields) == {"patch_net", "box_regressor"}
+    validate(DetectorConfig(verifier=trees, patch_net=SHIPPED, box_regressor="uav_vehicles_box_regressor.json"))
+    validate(DetectorConfig(verifier=trees, box_regressor="uav_vehicles_box_regressor_image.json"))
+
+
 def test_each_detector_has_its_own_network():
     """OpenCV's network keeps its input between calls: two detectors (two nodes in one process) must not share one."""
     config = DetectorConfig(verifier="uav_vehicles_verifier_trees.json", patch_net=SHIPPED)
