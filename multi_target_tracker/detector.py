@@ -150,6 +150,11 @@ class DetectorConfig:
                                "smaller box; 1: never)", low=0.0, high=1.0)
     suppression_iou: float = param(1.0, "also drop a group overlapping a better one by this IoU (non-maximum "
                                    "suppression; 1: never)", low=0.0, high=1.0)
+    containment_exempt_log_odds: float = param(50.0, "a verified group whose log odds (verifier and patch network "
+                                               "summed) reach this is not dropped by containment, only by "
+                                               "suppression_iou: one the verifier is that sure of, half inside a "
+                                               "better one, is taken as a vehicle beside it (vehicles that overlap "
+                                               "in the image); needs the verifier; 50: never", low=-50.0, high=50.0)
     window_margin: float = param(-0.5, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
                                  "windows, >0 fewer; default chosen by k-fold by video for the shipped drone-view "
                                  "model)", low=-100.0, high=100.0)
@@ -205,6 +210,9 @@ class DetectorConfig:
             raise ConfigError("blob_views needs the cascade backend", ("blob_views", "backend"))
         if self.verifier and self.backend != "cascade":
             raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
+        if self.containment_exempt_log_odds < 50.0 and not self.verifier:
+            raise ConfigError("containment_exempt_log_odds needs a verifier (its log odds)",
+                              ("containment_exempt_log_odds", "verifier"))
         if self.low_confidence_band > 0 and not self.verifier:
             raise ConfigError("low_confidence_band needs a verifier (its log odds)", ("low_confidence_band", "verifier"))
         if self.box_regressor and self.backend != "cascade":
@@ -437,34 +445,39 @@ def merge_levels(levels: list, with_vectors: bool):
 
 
 def suppress_contained(boxes: np.ndarray, scores: np.ndarray, containment: float,
-                       limit: int | None = None, iou: float = 1.0) -> np.ndarray:
+                       limit: int | None = None, iou: float = 1.0, exempt: np.ndarray | None = None) -> np.ndarray:
     """Indices of the boxes kept, best score first, dropping each box lying ``containment`` inside a
     better kept one (intersection over the smaller box's area) or overlapping one by ``iou`` (intersection over
-    union: greedy non-maximum suppression); at most ``limit``."""
+    union: greedy non-maximum suppression); the boxes of the mask ``exempt`` are tested by ``iou`` only; at most
+    ``limit``."""
     order = np.argsort(-np.asarray(scores, np.float64), kind="stable")
     limit = len(order) if limit is None else limit
     if (containment >= 1.0 and iou >= 1.0) or len(order) < 2:
         return order[:limit]
     boxes = np.ascontiguousarray(np.asarray(boxes, np.float64).reshape(-1, 4))
-    return _suppress_contained(boxes, order.astype(np.int64), float(containment), int(limit), float(iou))
+    exempt = np.zeros(len(order), np.bool_) if exempt is None else np.asarray(exempt, np.bool_).reshape(-1)
+    if len(exempt) != len(order):
+        raise ValueError(f"exempt has {len(exempt)} entries for {len(order)} boxes")
+    return _suppress_contained(boxes, exempt, order.astype(np.int64), float(containment), int(limit), float(iou))
 
 
 @numba.njit(cache=True, nogil=True)
-def _suppress_contained(boxes, order, containment, limit, iou):
+def _suppress_contained(boxes, exempt, order, containment, limit, iou):
     """Greedy containment and overlap suppression over ``order`` (compiled: the kept boxes are few, the loop is
-    O(n k)); a ratio of 1 never drops a box."""
+    O(n k)); a ratio of 1 never drops a box, nor containment an ``exempt`` one."""
     kept = np.empty(min(len(order), max(limit, 0)), np.int64)
     n_kept = 0
     for k in order:
         if n_kept >= limit:
             break
         ax, ay, aw, ah = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+        contain = containment < 1.0 and not exempt[k]
         inside = False
         for i in range(n_kept):
             b = kept[i]
             bx, by, bw, bh = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
             inter = max(min(ax + aw, bx + bw) - max(ax, bx), 0.0) * max(min(ay + ah, by + bh) - max(ay, by), 0.0)
-            if (containment < 1.0 and inter / max(min(aw * ah, bw * bh), 1e-12) >= containment) or \
+            if (contain and inter / max(min(aw * ah, bw * bh), 1e-12) >= containment) or \
                     (iou < 1.0 and inter / max(aw * ah + bw * bh - inter, 1e-12) >= iou):
                 inside = True
                 break
@@ -814,9 +827,18 @@ class Detector:
         group_boxes, logit = group_boxes[accepted], logit[accepted]
         if regression is not None and self.box_regressor.image_stages:
             group_boxes = self.box_regressor.refine_image(bgr, group_boxes, regression[accepted])
-        scores = expit(logit)
-        keep = suppress_contained(group_boxes, scores, cfg.containment, cfg.max_detections, cfg.suppression_iou)
-        return group_boxes[keep], scores[keep], (logit[keep] < cfg.verifier_threshold) if band > 0 else None
+        keep = self.suppressed(group_boxes, logit)
+        return group_boxes[keep], expit(logit[keep]), (logit[keep] < cfg.verifier_threshold) if band > 0 else None
+
+    def suppressed(self, boxes: np.ndarray, logit: np.ndarray) -> np.ndarray:
+        """Indices of the verified groups (``boxes``, summed log odds ``logit``) that :func:`suppress_contained` keeps,
+        best first: ``containment``, ``suppression_iou``, ``max_detections``, and ``containment_exempt_log_odds``
+        exempting the confident ones from containment."""
+        cfg = self.config
+        logit = np.asarray(logit, np.float64).reshape(-1)
+        exempt = logit >= cfg.containment_exempt_log_odds if cfg.containment_exempt_log_odds < 50.0 else None
+        return suppress_contained(boxes, expit(logit), cfg.containment, cfg.max_detections, cfg.suppression_iou,
+                                  exempt)
 
     def verified(self, bgr: np.ndarray, windows: Windows, margin_floor: float):
         """:meth:`_verified`'s detections proper ``(boxes, scores)``, without the low-confidence ones (what the

@@ -19,8 +19,8 @@ def _containment_reference(a, b):
     return inter / np.maximum(smaller, 1e-12)
 
 
-def suppress_reference(boxes, scores, containment, limit=None, iou=1.0):
-    """The former O(n^2) Python loop, with greedy IoU suppression beside containment."""
+def suppress_reference(boxes, scores, containment, limit=None, iou=1.0, exempt=None):
+    """The former O(n^2) Python loop, with greedy IoU suppression beside containment (not applied to ``exempt``)."""
     order = np.argsort(-scores, kind="stable")
     limit = len(order) if limit is None else limit
     if (containment >= 1.0 and iou >= 1.0) or len(order) < 2:
@@ -29,7 +29,8 @@ def suppress_reference(boxes, scores, containment, limit=None, iou=1.0):
     for k in order:
         if len(kept) >= limit:
             break
-        inside = containment < 1.0 and (_containment_reference(boxes[k:k + 1], boxes[kept])[0] >= containment).any()
+        inside = containment < 1.0 and not (exempt is not None and exempt[k]) and \
+            (_containment_reference(boxes[k:k + 1], boxes[kept])[0] >= containment).any()
         overlapping = iou < 1.0 and (box_iou(boxes[k:k + 1], boxes[kept]) >= iou).any()
         if not kept or not (inside or overlapping):
             kept.append(int(k))
@@ -112,6 +113,11 @@ def test_grouping_matches_the_python_loop_on_random_boxes(seed):
             for iou in (0.0, 0.3, 0.6):
                 assert suppress_contained(boxes, scores, settings["containment"], limit, iou).tolist() == \
                     suppress_reference(boxes, scores, settings["containment"], limit, iou).tolist()
+            for share in (0.0, 0.3, 1.0):
+                exempt = rng.random(n) < share
+                for iou in (0.4, 1.0):
+                    assert suppress_contained(boxes, scores, settings["containment"], limit, iou, exempt).tolist() == \
+                        suppress_reference(boxes, scores, settings["containment"], limit, iou, exempt).tolist()
 
 
 def test_overlap_suppression_keeps_overlapping_neighbours_that_containment_drops():
@@ -123,6 +129,19 @@ def test_overlap_suppression_keeps_overlapping_neighbours_that_containment_drops
     assert suppress_contained(boxes, scores, 0.5).tolist() == [0]
     assert suppress_contained(boxes, scores, 1.0, iou=0.5).tolist() == [0, 1]
     assert suppress_contained(boxes, scores, 1.0).tolist() == [0, 1, 2]      # both 1: nothing dropped
+
+
+def test_exempt_boxes_are_dropped_by_iou_only():
+    """The same three boxes: exempting the neighbour from containment keeps it beside the first; the duplicate is
+    dropped by containment unless exempt too, and then by an IoU of 0.5 still."""
+    boxes = np.array([[0.0, 0.0, 40.0, 80.0], [10.0, 40.0, 40.0, 60.0], [2.0, 4.0, 40.0, 76.0]])
+    scores = np.array([0.9, 0.8, 0.7])
+    assert suppress_contained(boxes, scores, 0.5, exempt=np.array([False, True, False])).tolist() == [0, 1]
+    assert suppress_contained(boxes, scores, 0.5, exempt=np.ones(3, bool)).tolist() == [0, 1, 2]
+    assert suppress_contained(boxes, scores, 0.5, iou=0.5, exempt=np.ones(3, bool)).tolist() == [0, 1]
+    assert suppress_contained(boxes, scores, 0.5, exempt=np.zeros(3, bool)).tolist() == [0]
+    with pytest.raises(ValueError, match="exempt"):
+        suppress_contained(boxes, scores, 0.5, exempt=np.ones(2, bool))
 
 
 @pytest.mark.parametrize("angle", [45.0, -30.0, 135.0])

@@ -254,9 +254,26 @@ def test_the_verified_detections_go_through_the_suppression_iou(detector, held_o
     assert len(Detector(dataclasses.replace(detector.config, suppression_iou=0.0)).detect(image)) == 1
 
 
+def test_the_verified_detections_exempt_the_confident_groups_from_containment(detector, held_out_frames):
+    """``containment_exempt_log_odds`` reaches the verified path: at -50 every accepted group is exempt, which is
+    containment 1 (off); at 50 (never) the set-up's detections."""
+    images = [image for image, _ in held_out_frames[HELD_OUT[0]]][:6]
+    every = Detector(dataclasses.replace(detector.config, containment_exempt_log_odds=-50.0))
+    off = Detector(dataclasses.replace(detector.config, containment=1.0))
+    assert detector.config.containment < 1.0
+    more = 0
+    for image in images:
+        exempt, without = every.detect(image), off.detect(image)
+        assert np.array_equal(exempt, without)
+        more += len(exempt) - len(detector.detect(image))
+    assert more > 0
+
+
 def test_low_confidence_band_needs_a_verifier():
     with pytest.raises(ConfigError):
         validate(DetectorConfig(low_confidence_band=1.0))
+    with pytest.raises(ConfigError, match="containment_exempt_log_odds"):
+        validate(DetectorConfig(containment_exempt_log_odds=5.0))
 
 
 def test_training_tools_build_the_setups_cascade_alone():

@@ -51,7 +51,7 @@ from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UavSceneConfig, detection_truth)
 from multi_target_tracker.box_regression import member_features  # noqa: E402
 from multi_target_tracker.detector import (  # noqa: E402
-    MODELS_DIR, Detector, DetectorConfig, members_stats, suppress_contained)
+    MODELS_DIR, Detector, DetectorConfig, members_stats)
 from multi_target_tracker.verifier import features, fit_tree_verifier, fit_verifier  # noqa: E402
 from scipy.special import expit  # noqa: E402
 
@@ -168,8 +168,7 @@ def swept_point(det: Detector, seeds, min_neighbors: list[int], max_false_alarms
             for (group_boxes, logit), truth, ignore in candidates:
                 accepted = logit >= threshold
                 kept_boxes, scores = group_boxes[accepted], expit(logit[accepted])
-                keep = suppress_contained(kept_boxes, scores, cfg.containment, cfg.max_detections,
-                                          cfg.suppression_iou)
+                keep = det.suppressed(kept_boxes, logit[accepted])
                 acc.add_frame(scale_boxes(kept_boxes[keep], cfg.box_scale), scores[keep], truth, ignore)
             s = acc.summary()
             point = {"min_neighbors": n, "verifier_threshold": round(float(threshold), 3),
