@@ -48,9 +48,10 @@ UAV_EVAL_SEEDS = range(3000, 4000)
 # Earlier UAV camera set-ups, as overrides of config/uav_camera.yaml's detector: bench/uav_detector.py measures
 # them beside the set-up and test/test_detector_uav_setup.py checks that the set-up still beats each.
 # the set-up of sessions 39-42 (issue 12), before the patch network (session 43): the groups placed by the box
-# regressor's image stages, the tree verifier's log odds alone against its threshold; every earlier set-up below too
+# regressor's image stages, the tree verifier's log odds alone against its threshold, every group half inside a
+# better one dropped (no containment exemption, session 45); every earlier set-up below too
 UAV_BEFORE_PATCH_NET = {"patch_net": "", "box_regressor": "uav_vehicles_box_regressor_image.json",
-                        "verifier_threshold": 1.9}
+                        "verifier_threshold": 1.9, "containment_exempt_log_odds": 50.0, "suppression_iou": 1.0}
 # the set-up before session 39: windows grouped by their upright boxes; every earlier set-up below too
 UAV_UPRIGHT_GROUPS = {**UAV_BEFORE_PATCH_NET, "group_shape": "upright"}
 # the set-up before the colour blobs' views (issue 12 session 33): the scan's windows alone, the turned views' whole
