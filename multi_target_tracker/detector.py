@@ -827,10 +827,10 @@ class Detector:
         group_boxes, logit = group_boxes[accepted], logit[accepted]
         if regression is not None and self.box_regressor.image_stages:
             group_boxes = self.box_regressor.refine_image(bgr, group_boxes, regression[accepted])
-        keep = self.suppressed(group_boxes, logit)
+        keep = self.kept_after_suppression(group_boxes, logit)
         return group_boxes[keep], expit(logit[keep]), (logit[keep] < cfg.verifier_threshold) if band > 0 else None
 
-    def suppressed(self, boxes: np.ndarray, logit: np.ndarray) -> np.ndarray:
+    def kept_after_suppression(self, boxes: np.ndarray, logit: np.ndarray) -> np.ndarray:
         """Indices of the verified groups (``boxes``, summed log odds ``logit``) that :func:`suppress_contained` keeps,
         best first: ``containment``, ``suppression_iou``, ``max_detections``, and ``containment_exempt_log_odds``
         exempting the confident ones from containment."""

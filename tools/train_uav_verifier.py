@@ -168,7 +168,7 @@ def swept_point(det: Detector, seeds, min_neighbors: list[int], max_false_alarms
             for (group_boxes, logit), truth, ignore in candidates:
                 accepted = logit >= threshold
                 kept_boxes, scores = group_boxes[accepted], expit(logit[accepted])
-                keep = det.suppressed(kept_boxes, logit[accepted])
+                keep = det.kept_after_suppression(kept_boxes, logit[accepted])
                 acc.add_frame(scale_boxes(kept_boxes[keep], cfg.box_scale), scores[keep], truth, ignore)
             s = acc.summary()
             point = {"min_neighbors": n, "verifier_threshold": round(float(threshold), 3),
