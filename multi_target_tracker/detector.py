@@ -78,6 +78,7 @@ from multi_target_tracker.verifier import TreeVerifier, Verifier, VerifierError,
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_MODEL = "drone_vehicles_fused.json"
+NEVER_EXEMPT = 50.0    # containment_exempt_log_odds that exempts no group (the top of its range)
 
 
 class DetectorError(ValueError):
@@ -150,11 +151,11 @@ class DetectorConfig:
                                "smaller box; 1: never)", low=0.0, high=1.0)
     suppression_iou: float = param(1.0, "also drop a group overlapping a better one by this IoU (non-maximum "
                                    "suppression; 1: never)", low=0.0, high=1.0)
-    containment_exempt_log_odds: float = param(50.0, "a verified group whose log odds (verifier and patch network "
+    containment_exempt_log_odds: float = param(NEVER_EXEMPT, "a verified group whose log odds (verifier and patch network "
                                                "summed) reach this is not dropped by containment, only by "
                                                "suppression_iou: one the verifier is that sure of, half inside a "
                                                "better one, is taken as a vehicle beside it (vehicles that overlap "
-                                               "in the image); needs the verifier; 50: never", low=-50.0, high=50.0)
+                                               "in the image); needs the verifier; 50: never", low=-50.0, high=NEVER_EXEMPT)
     window_margin: float = param(-0.5, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
                                  "windows, >0 fewer; default chosen by k-fold by video for the shipped drone-view "
                                  "model)", low=-100.0, high=100.0)
@@ -210,7 +211,7 @@ class DetectorConfig:
             raise ConfigError("blob_views needs the cascade backend", ("blob_views", "backend"))
         if self.verifier and self.backend != "cascade":
             raise ConfigError("a verifier needs the cascade backend", ("verifier", "backend"))
-        if self.containment_exempt_log_odds < 50.0 and not self.verifier:
+        if self.containment_exempt_log_odds < NEVER_EXEMPT and not self.verifier:
             raise ConfigError("containment_exempt_log_odds needs a verifier (its log odds)",
                               ("containment_exempt_log_odds", "verifier"))
         if self.low_confidence_band > 0 and not self.verifier:
@@ -836,7 +837,7 @@ class Detector:
         exempting the confident ones from containment."""
         cfg = self.config
         logit = np.asarray(logit, np.float64).reshape(-1)
-        exempt = logit >= cfg.containment_exempt_log_odds if cfg.containment_exempt_log_odds < 50.0 else None
+        exempt = logit >= cfg.containment_exempt_log_odds if cfg.containment_exempt_log_odds < NEVER_EXEMPT else None
         return suppress_contained(boxes, expit(logit), cfg.containment, cfg.max_detections, cfg.suppression_iou,
                                   exempt)
 

@@ -158,10 +158,8 @@ def main() -> int:
         raise SystemExit("this tool needs PyTorch (pip install torch); the package itself does not") from None
     torch.set_num_threads(args.threads)
     cv2.setNumThreads(1)
-    det = setup_detector(parse_overrides(args.set))        # the set-up before the patch network
-    if not 1 <= args.train_scenes <= 100:
-        raise SystemExit(f"--train-scenes {args.train_scenes}: 1..100 (seeds 1100.. are difficulty 2's)")
     scenes = training_scenes(args.train_scenes)
+    det = setup_detector(parse_overrides(args.set))        # the set-up before the patch network
     cache = Path(args.samples) if args.samples else None
     if cache is not None and cache.is_file():
         with np.load(cache, allow_pickle=False) as stored:

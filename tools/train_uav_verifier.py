@@ -110,14 +110,20 @@ def setup_verifier(overrides: dict | None = None):
     return setup_detector({**(overrides or {}), "box_regressor": ""}).verifier
 
 
+DIFFICULTY_2_SEEDS = 100   # difficulty 2's training (and tuning) seeds begin this far after difficulty 1's
+
+
 def training_scenes(n: int) -> list[tuple[int, int]]:
-    """(seed, difficulty) of the first ``n`` training scenes of difficulty 1 and half as many of difficulty 2."""
+    """(seed, difficulty) of the first ``n`` training scenes of difficulty 1 and half as many of difficulty 2; ``n`` at
+    most :data:`DIFFICULTY_2_SEEDS`, where difficulty 2's seeds begin (more would train on their seed numbers twice)."""
+    if not 1 <= n <= DIFFICULTY_2_SEEDS:
+        raise SystemExit(f"--train-scenes {n}: 1..{DIFFICULTY_2_SEEDS} (difficulty 2's seeds begin after that)")
     first = UAV_TRAIN_SEEDS.start
-    return [(first + k, 1) for k in range(n)] + [(first + 100 + k, 2) for k in range(n // 2)]
+    return [(first + k, 1) for k in range(n)] + [(first + DIFFICULTY_2_SEEDS + k, 2) for k in range(n // 2)]
 
 
 TUNING = ([(UAV_TUNING_SEEDS.start + k, 1) for k in range(12)] +
-          [(UAV_TUNING_SEEDS.start + 100 + k, 2) for k in range(6)])
+          [(UAV_TUNING_SEEDS.start + DIFFICULTY_2_SEEDS + k, 2) for k in range(6)])
 
 
 def samples(det: Detector, seeds, min_windows: int, refined: bool = False) -> tuple[np.ndarray, np.ndarray]:
