@@ -85,6 +85,29 @@ def test_level_scan_equals_reference_window_by_window(stride):
             assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
 
 
+@pytest.mark.parametrize("stride", [2, 4, 8])
+def test_level_scan_block_histograms_are_every_blocks_code_counts(stride):
+    """The running sums of cell histograms (``_block_histograms``) give each 16x16 block's code histogram, at every
+    block position of the level, and each window's largest bin of its four blocks (eq. 3's maximum)."""
+    rng = np.random.default_rng(10 + stride)
+    frame = cv2.GaussianBlur(rng.integers(0, 255, (130, 170), dtype=np.uint8), (3, 3), 1.0)
+    frame[20:50, 30:90] = 200                    # a flat patch: many equal codes, bins near their largest
+    level = (103, 87)
+    scan = F.LevelScan(frame, level, stride, "lbp", 12.0)
+    codes = F.lbp_codes(cv2.resize(frame, level, interpolation=cv2.INTER_AREA))
+    planes, by, bx = scan.blocks.shape
+    assert planes == F.N_CODES and by > 16 // stride and bx > 16 // stride
+    for y in range(by):
+        for x in range(bx):
+            patch = codes[y * stride:y * stride + F.BLOCK, x * stride:x * stride + F.BLOCK]
+            assert np.array_equal(scan.blocks[:, y, x], np.bincount(patch.ravel(), minlength=F.N_CODES))
+    per = F.BLOCK // stride
+    for w in range(scan.n_windows):
+        r, c = divmod(w, scan.cols)
+        tops = [scan.blocks[:, r + dy, c + dx].max() for dy in (0, per) for dx in (0, per)]
+        assert scan.m_lbp[w] == max(tops)
+
+
 def test_level_scan_cascade_with_thresholds_outside_the_feature_range():
     """Stump thresholds below 0 and above 255 (a hand-made or foreign model): the compiled loop's integer test
     decides them as the cascade does on the normalised vectors (always / never passing)."""
