@@ -294,7 +294,6 @@ def main() -> int:
     cv2.setNumThreads(1)
     seeds = eval_seeds(args.quick)
     det = setup_detector()
-    det.detect(np.zeros((480, 640, 3), np.uint8))    # compile the scan before timing
     # no altitude prior: every window size from the model's own window up to the frame
     full = variant(det, {"min_size": float(det.window[1]), "max_size": 1e4})
     former = Detector(DetectorConfig(**FORMER))
@@ -307,6 +306,14 @@ def main() -> int:
     verifier_only = variant(det, VERIFIER_ONLY)
     logistic = variant(det, LOGISTIC)
     other = variant(det, {"model": args.other_seed_model}) if args.other_seed_model else None
+    # compile and load every path before timing (the scan, the blobs' views, grouping, verifier, network): a frame of
+    # a tuning scene, not an evaluation one. A blank frame left the blob and group paths to the first evaluation seed,
+    # whose frames/s (1.6 against 4.2-6.2 in session 45's run) then pulled the mean over seeds down
+    warm_up = frames_of(TUNING[0][0], TUNING[0][1], UAV_SETUP_GROUND_RESOLUTION, frames=8)[0][0]
+    for detector in (det, full, former, upright, previous, before_blobs, upright_groups, before_patch_net,
+                     cascade_only, verifier_only, logistic, other):
+        if detector is not None:
+            detector.detect(warm_up)
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
