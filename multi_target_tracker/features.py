@@ -450,7 +450,7 @@ def _block_histograms(codes, cell, rows, cols):
     running sums: along each row of cells (a block's width of cells: the previous sum, plus the cell entering,
     minus the cell leaving, 256 adjacent bins at a time), then down those rows the same way. Integer sums, so
     exactly the direct sums, at two additions and a subtraction a bin per direction whatever the cell (stride 4:
-    16 additions a bin before, 0.85x the drone-view set-up's frame time); its maximum is taken over its 256
+    16 additions a bin before: 0.83x the drone-view set-up's frame time); its maximum is taken over its 256
     adjacent bins."""
     hc, wc = codes.shape[0] // cell, codes.shape[1] // cell
     cells = np.zeros((hc, wc * N_CODES), np.int16)
