@@ -320,19 +320,23 @@ def quantised(vector: np.ndarray) -> np.ndarray:
 def _inner_contour_image(g, edge_threshold):
     """:func:`contour_image` of ``g`` with its outermost pixels cleared (they have no full Laplacian
     neighbourhood), in one compiled pass instead of OpenCV's Laplacian, absolute value, threshold and
-    four border writes: the same integer 4-neighbour Laplacian ``|l| > edge_threshold`` per pixel, in int16
-    (``|l| <= 1020``) against ``floor(edge_threshold)`` (the same test for an integer ``l``)."""
+    four border writes: the same integer 4-neighbour Laplacian ``|l| > edge_threshold`` per pixel against
+    ``floor(edge_threshold)`` (the same test for an integer ``l``). Every sum is cast back to int16 (``|l| <= 1020``):
+    numba would widen int16 arithmetic to int64, and int16 lanes make the pass 4x faster (session 47, a 902x1392
+    level: 0.37 against 1.51 ms); ``|l| > limit`` is tested as ``l > limit or l < -limit`` for the same reason."""
     h, w = g.shape
     b = np.zeros((h, w), np.uint8)
     limit = np.int16(min(max(np.floor(edge_threshold), -1.0), 1020.0))
+    below = np.int16(-limit)
     four = np.int16(4)
     for y in range(1, h - 1):
         up, row, down = g[y - 1], g[y], g[y + 1]
         out = b[y]
         for x in range(1, w - 1):
-            lap = np.int16(up[x]) + np.int16(down[x]) + np.int16(row[x - 1]) + np.int16(row[x + 1]) \
-                - four * np.int16(row[x])
-            out[x] = np.uint8(abs(lap) > limit)
+            lap = np.int16(np.int16(np.int16(up[x]) + np.int16(down[x]))
+                           + np.int16(np.int16(row[x - 1]) + np.int16(row[x + 1]))
+                           - np.int16(four * np.int16(row[x])))
+            out[x] = np.uint8((lap > limit) | (lap < below))
     return b
 
 

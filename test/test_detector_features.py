@@ -192,12 +192,15 @@ def test_contour_image_is_the_thresholded_absolute_laplacian(threshold):
         assert np.array_equal(F.contour_image(gray, threshold), (np.abs(lap) > threshold).astype(np.uint8))
 
 
-@pytest.mark.parametrize("threshold", [0.0, 0.5, 39.9, 40.0, 40.5, 254.5, 255.0, 300.0])
+@pytest.mark.parametrize("threshold", [0.0, 0.5, 39.9, 40.0, 40.5, 254.5, 255.0, 300.0, 1019.0, 1019.5])
 def test_compiled_inner_contour_image_is_the_contour_image_without_its_rim(threshold):
-    """The scan's one-pass kernel gives contour_image's pixels exactly, its outermost pixels cleared."""
+    """The scan's one-pass kernel gives contour_image's pixels exactly, its outermost pixels cleared; a 0/255
+    checkerboard reaches the Laplacian's extremes (+-1020), which its int16 sums must hold."""
     rng = np.random.default_rng(int(threshold * 10) + 1)
+    checkerboard = (255 * (np.indices((20, 30)).sum(axis=0) % 2)).astype(np.uint8)
     for gray in (rng.integers(0, 256, (41, 67), dtype=np.uint8),
                  cv2.GaussianBlur(rng.integers(0, 256, (40, 60), dtype=np.uint8), (0, 0), 1.5),
+                 checkerboard,
                  np.asfortranarray(rng.integers(0, 256, (3, 9), dtype=np.uint8))):
         want = F.contour_image(gray, threshold)
         want[0, :] = want[-1, :] = 0
