@@ -410,8 +410,10 @@ def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4
     height, width = gray.shape
     w0, h0 = cascade.window
     level = (int(round(width * LBP_SIZE / (w0 * scale))), int(round(height * LBP_SIZE / (h0 * scale))))
-    scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold)
-    idx, score = (scan.evaluate(cascade.packed(), last_stage_margin) if scan.n_windows
+    packed = cascade.packed()
+    scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold,
+                     None if with_vectors else packed.codes)   # detection keeps the planes of the codes it reads
+    idx, score = (scan.evaluate(packed, last_stage_margin) if scan.n_windows
                   else (np.zeros(0, np.int64), np.zeros(0)))
     fx, fy = width / max(level[0], 1), height / max(level[1], 1)
     origin = scan.window_origins(idx)

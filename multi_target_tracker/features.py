@@ -183,7 +183,8 @@ class PackedStages:
     """A cascade's stumps in flat arrays, what :meth:`LevelScan.evaluate` reads: stage s holds stumps
     ``ends[s-1] .. ends[s]-1`` and passes when their sum reaches ``stage_thresholds[s]``. Built from
     any stages with ``features, thresholds, left, right, threshold`` (``cascade.Stage``); kept here so
-    that the cascade module imports the features and never the other way round."""
+    that the cascade module imports the features and never the other way round. ``codes``: the LBP codes its
+    texture stumps read (sorted), the only code planes a :class:`LevelScan` needs to keep for it."""
 
     features: np.ndarray
     thresholds: np.ndarray
@@ -191,15 +192,18 @@ class PackedStages:
     right: np.ndarray
     ends: np.ndarray
     stage_thresholds: np.ndarray
+    codes: np.ndarray
 
     @classmethod
     def of(cls, stages: list) -> "PackedStages":
         def flat(name, dtype):
             return np.ascontiguousarray(np.concatenate([getattr(s, name) for s in stages]) if stages
                                         else np.zeros(0), dtype)
-        return cls(flat("features", np.int64), flat("thresholds", np.int64), flat("left", np.float64),
+        features = flat("features", np.int64)
+        return cls(features, flat("thresholds", np.int64), flat("left", np.float64),
                    flat("right", np.float64), np.cumsum([len(s.features) for s in stages], dtype=np.int64),
-                   np.asarray([s.threshold for s in stages], np.float64).reshape(-1))
+                   np.asarray([s.threshold for s in stages], np.float64).reshape(-1),
+                   np.unique(features[features < LBP_DIM] % N_CODES))
 
 
 class LevelScan:
@@ -209,14 +213,22 @@ class LevelScan:
     level is the same frame resized to exactly twice that size (both OpenCV's ``INTER_AREA``, computed
     to the same bits by :func:`area_resize.resize_area`). Windows have their top-left
     *code* position at ``(row * stride, col * stride)`` (pixel ``+1`` in ``gray_l``), ``stride``
-    dividing 16 so that every block lies on the histogram cell grid.
+    dividing 16 so that every block lies on the histogram cell grid. ``codes``: the LBP codes whose block
+    planes are kept (a cascade's :attr:`PackedStages.codes`: a scan for detection); all 256 by default, which
+    :meth:`vectors` needs.
     """
 
     def __init__(self, frame_gray: np.ndarray, level_size: tuple[int, int], stride: int,
-                 feature_set: str, edge_threshold: float):
+                 feature_set: str, edge_threshold: float, codes: np.ndarray | None = None):
         if BLOCK % stride:
             raise FeatureError(f"stride {stride} must divide the block size {BLOCK}")
         feature_range(feature_set)
+        self.codes = np.arange(N_CODES) if codes is None else np.asarray(codes, np.int64).reshape(-1)
+        if len(self.codes) and (self.codes.min() < 0 or self.codes.max() >= N_CODES
+                                or np.any(np.diff(self.codes) <= 0)):
+            raise FeatureError(f"codes must be distinct sorted LBP codes in 0..255, got {codes}")
+        self.plane_of = np.full(N_CODES, -1, np.int64)     # code -> its plane in ``blocks`` (-1: not kept)
+        self.plane_of[self.codes] = np.arange(len(self.codes))
         frame_gray = _gray(frame_gray)
         wl, hl = level_size
         self.stride, self.feature_set = stride, feature_set
@@ -243,13 +255,11 @@ class LevelScan:
         r, c = np.divmod(flat, self.cols)
         return np.stack([c * self.stride + 1, r * self.stride + 1], axis=1).reshape(-1, 2)
 
-    # --- texture: cell histograms -> block histograms -> per-window maximum (eq. 3)
+    # --- texture: block histograms swept down the level -> kept code planes, per-window maximum (eq. 3)
     def _texture(self, gray_l: np.ndarray) -> None:
-        blocks, self.m_lbp = _block_histograms(lbp_codes(gray_l), self.stride, self.rows, self.cols)
-        by, bx = blocks.shape[0], blocks.shape[1] // N_CODES
-        # blocks[code, by, bx]: histogram of the 16x16 block at cell (by, bx), one plane per code (the cascade's
-        # stumps each read one code across all windows)
-        self.blocks = cv2.transpose(blocks.reshape(by * bx, N_CODES)).reshape(N_CODES, by, bx)
+        # blocks[plane_of[code], by, bx]: count of the code in the 16x16 block at cell (by, bx), one plane per kept
+        # code (the cascade's stumps each read one code across all windows)
+        self.blocks, self.m_lbp = _code_planes(lbp_codes(gray_l), self.stride, self.rows, self.cols, self.codes)
 
     # --- contour: potential maps from prefix sums, per-window maximum over its runs (eq. 4)
     def _contour(self, gray_c: np.ndarray, edge_threshold: float) -> None:
@@ -272,10 +282,13 @@ class LevelScan:
         in integers), stage by stage over the windows still alive (Viola-Jones' early exit), compiled
         by numba: a rejected window's later features are never read.
         """
+        if self.m_lbp is not None and np.any(self.plane_of[stages.codes] < 0):
+            missing = stages.codes[self.plane_of[stages.codes] < 0]
+            raise FeatureError(f"the cascade reads LBP codes {missing.tolist()} whose planes this scan did not keep")
         empty_i16 = np.zeros((N_CODES, 1, 1), np.int16)   # tables a feature set does not use
         empty_f32, empty_i64 = np.zeros((1, 1), np.float32), np.zeros(1, np.int64)
         return _evaluate_level(
-            self.blocks if self.m_lbp is not None else empty_i16,
+            self.blocks if self.m_lbp is not None else empty_i16, self.plane_of,
             self.px if self.m_contour is not None else empty_f32,
             self.py if self.m_contour is not None else empty_f32,
             self.m_lbp if self.m_lbp is not None else empty_i64,
@@ -287,7 +300,9 @@ class LevelScan:
             float(last_stage_margin))
 
     def vectors(self, windows: np.ndarray) -> np.ndarray:
-        """Full normalised 1152-d vectors (uint8, floored) of some windows, for training."""
+        """Full normalised 1152-d vectors (uint8, floored) of some windows, for training (a scan keeping every code)."""
+        if self.m_lbp is not None and len(self.codes) < N_CODES:
+            raise FeatureError("vectors need every code's plane: build the scan with codes=None")
         out = np.zeros((len(windows), FUSED_DIM), np.uint8)
         if len(windows) == 0:
             return out
@@ -426,80 +441,82 @@ def _contour_maxima(px, py, step, n, rows, cols):
 
 
 @numba.njit(cache=True, nogil=True)
-def _running_sum(out, first, rest, count):
-    """``out = first + rest[0:n] + rest[n:2n] + ...`` (``count`` runs of ``n = len(out)`` in ``rest``), elementwise."""
-    n = len(out)
-    out[:] = first
-    for j in range(count):
-        for k in range(n):
-            out[k] += rest[j * n + k]
+def _code_planes(codes, cell, rows, cols, kept):
+    """The 16x16 blocks' code histograms, as planes of the ``kept`` codes only, and each window's largest bin (eq. 3's
+    maximum, over all 256 codes): ``(planes, m_lbp)`` with ``planes[k, by, bx]`` (int16) the count of code ``kept[k]``
+    in the block whose top-left ``cell x cell`` cell is (by, bx), and ``m_lbp[row * cols + col]`` (int64) the largest
+    bin of the four blocks of the window at cell (row, col).
 
-
-@numba.njit(cache=True, nogil=True)
-def _step(out, previous, entering, leaving):
-    """``out = previous + entering - leaving`` elementwise: a running sum moved one cell on."""
-    for k in range(len(out)):
-        out[k] = previous[k] + entering[k] - leaving[k]
-
-
-@numba.njit(cache=True, nogil=True)
-def _block_histograms(codes, cell, rows, cols):
-    """The 16x16 blocks' code histograms and each window's largest bin (eq. 3's maximum), in one pass each:
-    ``(blocks, m_lbp)`` with ``blocks[by, bx * 256 + code]`` (int16) the histogram of the block whose top-left
-    ``cell x cell`` cell is (by, bx), and ``m_lbp[row * cols + col]`` (int64) the largest bin of the four
-    blocks of the window at cell (row, col).
-
-    Cell histograms first, each cell's 256 bins side by side (a row of cells stays in cache while its
-    pixels are counted); a block is the sum of its ``16 / cell`` x ``16 / cell`` cells, summed separably with
-    running sums: along each row of cells (a block's width of cells: the previous sum, plus the cell entering,
-    minus the cell leaving, 256 adjacent bins at a time), then down those rows the same way. Integer sums, so
-    exactly the direct sums, at two additions and a subtraction a bin per direction whatever the cell (stride 4:
-    16 additions a bin before: 0.83x the drone-view set-up's frame time); its maximum is taken over its 256
-    adjacent bins."""
+    One sweep down the level, a block row at a time, holding only one histogram per column of cells (``cell`` wide,
+    16 tall): moving down a block row takes a cell's pixels out of each and puts the next cell's in (neighbouring
+    columns' counts interleaved, so that no increment waits for the last one's store when a code repeats); along the
+    row, a block is the previous one plus the column entering minus the column leaving, 256 adjacent int16 bins at a
+    time, its maximum taken there and only its ``kept`` bins stored. Integer counts, so exactly the direct sums. A
+    cascade reads few codes (the drone-view model 62, the UAV model 81). Against building every block's 256 bins in
+    memory and transposing them into planes (session 46's kernel), on a 640x480 drone-view level at stride 4: 2.8 against
+    8.0 ms; on the UAV set-up's finest level at stride 8, where that kernel's cells were 4x fewer: 1.02 against 1.02 ms
+    (session 47)."""
     hc, wc = codes.shape[0] // cell, codes.shape[1] // cell
-    cells = np.zeros((hc, wc * N_CODES), np.int16)
-    for y in range(hc * cell):
-        line, row = cells[y // cell], codes[y]
-        for j in range(cell):                  # neighbouring counts land in different cells: no increment waits
-            for cx in range(wc):               # for the last one's store when a cell repeats a code
-                line[cx * N_CODES + row[cx * cell + j]] += 1
     per = BLOCK // cell
     hb, wb = hc - per + 1, wc - per + 1
-    length = wb * N_CODES
-    across = np.empty((hc, length), np.int16)          # each row's sums of ``per`` neighbouring cells
-    for cy in range(hc):
-        source, out = cells[cy], across[cy]
-        _running_sum(out[:N_CODES], source[:N_CODES], source[N_CODES:per * N_CODES], per - 1)
-        for bx in range(1, wb):
-            _step(out[bx * N_CODES:(bx + 1) * N_CODES], out[(bx - 1) * N_CODES:bx * N_CODES],
-                  source[(bx + per - 1) * N_CODES:(bx + per) * N_CODES], source[(bx - 1) * N_CODES:bx * N_CODES])
-    blocks = np.empty((hb, length), np.int16)          # ``per`` rows of those
-    _running_sum(blocks[0], across[0], across[1:per].ravel(), per - 1)
-    for by in range(1, hb):
-        _step(blocks[by], blocks[by - 1], across[by + per - 1], across[by - 1])
+    planes = np.empty((len(kept), hb, wb), np.int16)
     block_max = np.empty((hb, wb), np.int16)
+    columns = np.zeros((wc, N_CODES), np.int16)       # the current block row's histogram of each column of cells
+    one = np.int16(1)
+    for y in range(BLOCK):
+        line = codes[y]
+        for j in range(cell):
+            for cx in range(wc):
+                columns[cx, line[cx * cell + j]] += one
+    block = np.empty(N_CODES, np.int16)
+    row_bins = np.empty((wb, N_CODES), np.int16)        # the block row's histograms, stored plane by plane after
     for by in range(hb):
-        out = blocks[by]
+        if by > 0:                                      # one cell row leaves the columns, the next one enters
+            for y in range((by - 1) * cell, by * cell):
+                line = codes[y]
+                for j in range(cell):
+                    for cx in range(wc):
+                        columns[cx, line[cx * cell + j]] -= one
+            for y in range((by - 1) * cell + BLOCK, by * cell + BLOCK):
+                line = codes[y]
+                for j in range(cell):
+                    for cx in range(wc):
+                        columns[cx, line[cx * cell + j]] += one
+        for k in range(N_CODES):
+            block[k] = columns[0, k]
+        for q in range(1, per):
+            column = columns[q]
+            for k in range(N_CODES):
+                block[k] = np.int16(block[k] + column[k])   # int16 sums (numba would widen them: 4x narrower lanes)
         for bx in range(wb):
-            top = out[bx * N_CODES]
-            for k in range(bx * N_CODES + 1, (bx + 1) * N_CODES):
-                top = out[k] if out[k] > top else top
+            if bx > 0:
+                entering, leaving = columns[bx + per - 1], columns[bx - 1]
+                for k in range(N_CODES):
+                    block[k] = np.int16(np.int16(block[k] + entering[k]) - leaving[k])
+            top = block[0]
+            for k in range(1, N_CODES):
+                top = max(top, block[k])
             block_max[by, bx] = top
+            row_bins[bx] = block
+        for k in range(len(kept)):      # one plane at a time: its stores run along the row (2x faster than by block)
+            code, out = kept[k], planes[k, by]
+            for bx in range(wb):
+                out[bx] = row_bins[bx, code]
     m_lbp = np.empty(rows * cols, np.int64)
     for r in range(rows):                      # the window's blocks: BLOCK_OFFSETS, ``per`` cells apart
         for c in range(cols):
             m_lbp[r * cols + c] = max(max(block_max[r, c], block_max[r, c + per]),
                                       max(block_max[r + per, c], block_max[r + per, c + per]))
-    return blocks, m_lbp
+    return planes, m_lbp
 
 
 @numba.njit(cache=True, nogil=True)
-def _evaluate_level(blocks, px, py, m_lbp, m_contour, rows, cols, cells_per_block, x0, y0,
+def _evaluate_level(blocks, plane_of, px, py, m_lbp, m_contour, rows, cols, cells_per_block, x0, y0,
                     features, thresholds, left, right, ends, stage_thresholds, last_stage_margin):
     """The cascade over every window of a level (see :meth:`LevelScan.evaluate`).
 
     Stump j reads raw feature ``features[j]`` of a window: texture bin (block, code) from
-    ``blocks[code]``, contour potential ``P_x(k)`` from ``px`` or ``P_y(k)`` from ``py``; it tests
+    ``blocks[plane_of[code]]``, contour potential ``P_x(k)`` from ``px`` or ``P_y(k)`` from ``py``; it tests
     ``255 * value >= thresholds[j] * max`` (eqs. 3-4 without a division) and adds ``right[j]`` when
     it passes, else ``left[j]``. Stage s spans stumps ``ends[s-1] .. ends[s]-1`` and keeps the windows
     whose sum reaches its threshold. Stump by stump over the surviving windows, so that each stump
@@ -543,7 +560,7 @@ def _evaluate_level(blocks, px, py, m_lbp, m_contour, rows, cols, cells_per_bloc
             f, t = features[j], np.int32(min(max(thresholds[j], 0), 256))
             pair[0], pair[1] = left[j], right[j]
             if f < LBP_DIM:
-                shift = (f % N_CODES) * plane_size + (f // N_CODES // 2) * cells_per_block * bw \
+                shift = plane_of[f % N_CODES] * plane_size + (f // N_CODES // 2) * cells_per_block * bw \
                     + (f // N_CODES % 2) * cells_per_block
                 for a in range(m):
                     mx = ml[a]

@@ -78,17 +78,41 @@ def test_level_scan_equals_reference_window_by_window(stride):
     for seed in range(3):
         stages = [_random_stage(np.random.default_rng(100 * stride + 10 * seed + k), every) for k in range(3)]
         cascade = Cascade((32, 32), "fused", 12.0, stages)
+        # a scan for detection keeps only the planes of the codes the cascade reads
+        kept = F.LevelScan(frame, level, stride, "fused", 12.0, cascade.packed().codes)
+        assert len(kept.codes) < F.N_CODES and kept.blocks.shape[0] == len(kept.codes)
         for margin in (0.0, -0.5):
             idx, score = scan.evaluate(cascade.packed(), margin)
             ref_idx, ref_score = cascade.evaluate_vectors(every, margin)
             assert 0 < len(ref_idx) < scan.n_windows     # the stages reject some windows and keep some
             assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
+            kept_idx, kept_score = kept.evaluate(cascade.packed(), margin)
+            assert np.array_equal(kept_idx, idx) and np.array_equal(kept_score, score)
 
 
-@pytest.mark.parametrize("stride", [2, 4, 8])
+def test_level_scan_refuses_what_its_kept_code_planes_cannot_give():
+    """A scan keeping some codes' planes refuses a cascade reading another code, and the full training vectors;
+    codes outside 0..255, repeated or unsorted are refused when it is built."""
+    rng = np.random.default_rng(3)
+    frame = cv2.GaussianBlur(rng.integers(0, 255, (150, 190), dtype=np.uint8), (5, 5), 1.5)
+    every = F.LevelScan(frame, (121, 97), 4, "fused", 12.0).vectors(np.arange(10))
+    cascade = Cascade((32, 32), "fused", 12.0, [_random_stage(rng, every)])
+    codes = cascade.packed().codes
+    scan = F.LevelScan(frame, (121, 97), 4, "fused", 12.0, codes[1:])
+    with pytest.raises(F.FeatureError, match=f"codes \\[{codes[0]}\\]"):
+        scan.evaluate(cascade.packed())
+    with pytest.raises(F.FeatureError, match="every code"):
+        scan.vectors(np.arange(3))
+    for bad in ([-1, 3], [3, 256], [5, 5], [7, 2]):
+        with pytest.raises(F.FeatureError, match="distinct sorted"):
+            F.LevelScan(frame, (121, 97), 4, "fused", 12.0, bad)
+
+
+@pytest.mark.parametrize("stride", [2, 4, 8, 16])
 def test_level_scan_block_histograms_are_every_blocks_code_counts(stride):
-    """The running sums of cell histograms (``_block_histograms``) give each 16x16 block's code histogram, at every
-    block position of the level, and each window's largest bin of its four blocks (eq. 3's maximum)."""
+    """The block sweep (``_code_planes``) gives each 16x16 block's code histogram, at every block position of the
+    level, and each window's largest bin of its four blocks (eq. 3's maximum); keeping some codes' planes keeps
+    those planes and the same maxima (over all 256 codes)."""
     rng = np.random.default_rng(10 + stride)
     frame = cv2.GaussianBlur(rng.integers(0, 255, (130, 170), dtype=np.uint8), (3, 3), 1.0)
     frame[20:50, 30:90] = 200                    # a flat patch: many equal codes, bins near their largest
@@ -106,6 +130,9 @@ def test_level_scan_block_histograms_are_every_blocks_code_counts(stride):
         r, c = divmod(w, scan.cols)
         tops = [scan.blocks[:, r + dy, c + dx].max() for dy in (0, per) for dx in (0, per)]
         assert scan.m_lbp[w] == max(tops)
+    rare = np.flatnonzero(np.bincount(codes.ravel(), minlength=F.N_CODES) < 3)[:5]  # maxima not among the kept codes
+    kept = F.LevelScan(frame, level, stride, "lbp", 12.0, rare)
+    assert np.array_equal(kept.blocks, scan.blocks[rare]) and np.array_equal(kept.m_lbp, scan.m_lbp)
 
 
 def test_level_scan_cascade_with_thresholds_outside_the_feature_range():
