@@ -188,6 +188,24 @@ def test_border_lets_windows_reach_past_the_frame_onto_a_cut_object():
     assert turned_view(gray, 0.0, 0)[1] is None and turned_view(gray, 0.0, 0)[0] is gray
 
 
+def test_windows_of_several_views_map_back_at_once_as_each_view_maps_them():
+    """One map per window (the detector maps all its blob views' windows in one call) gives each view's windows
+    exactly what mapping them view by view gives, with the same windows dropped."""
+    from multi_target_tracker.detector import map_back, turned_view
+
+    rng = np.random.default_rng(4)
+    gray = rng.integers(0, 255, (240, 320), np.uint8)
+    backs = [turned_view(gray, angle, 16)[1] for angle in (0.0, 30.0, 45.0, 100.0)]
+    windows = [np.column_stack([rng.uniform(-20, 380, (n, 2)), rng.uniform(10, 60, (n, 2))]) for n in (7, 0, 12, 9)]
+    scores = [rng.random(len(w)) for w in windows]
+    one_by_one = [map_back(w, sc, back, (320, 240), with_quads=True) for w, sc, back in zip(windows, scores, backs)]
+    per_window = np.repeat(np.stack(backs), [len(w) for w in windows], axis=0)
+    at_once = map_back(np.concatenate(windows), np.concatenate(scores), per_window, (320, 240), with_quads=True)
+    for k in range(3):
+        assert np.array_equal(at_once[k], np.concatenate([m[k] for m in one_by_one]))
+    assert 0 < len(at_once[0]) < sum(map(len, windows))               # some windows centred outside are dropped
+
+
 def test_turned_crop_keeps_the_central_square_of_the_turned_view():
     """With ``crop`` a turned view is the central square of the whole turned canvas (crop times the square root of
     the frame's area a side), mapped back to the same frame points; the upright view is never cropped."""
