@@ -71,6 +71,7 @@ from aircraft_docking_tracker.geometry import box_to_quad, scale_boxes
 from aircraft_docking_tracker.object_table import DETECTION_DTYPE, FLAGGED_DETECTION_DTYPE, LOW_CONFIDENCE
 from multi_target_tracker import blob_views
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
+from multi_target_tracker.area_resize import resize_area
 from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
 from multi_target_tracker.heading import turned_canvas
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
@@ -430,6 +431,57 @@ def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4
     return boxes, score, (scan.vectors(idx) if with_vectors else None)
 
 
+def scan_canvases(canvases: list[tuple[np.ndarray, float]], cascade: Cascade, stride: int = 4,
+                  last_stage_margin: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`scan_level` of each ``(canvas, scale)``, ``(boxes, scores)`` a canvas: the same windows and scores, from
+    one :class:`LevelScan` of their levels side by side (each at a multiple of ``stride``, so that it keeps its window
+    grid; only the windows inside one canvas are scored, and they see its pixels only). The blob views are many and
+    small (about 37 a UAV frame): one scan each spent more on its fixed costs than on its pixels."""
+    w0, h0 = cascade.window
+    sizes = [(int(round(c.shape[1] * LBP_SIZE / (w0 * s))), int(round(c.shape[0] * LBP_SIZE / (h0 * s))))
+             for c, s in canvases]
+    inside = [(max(0, (hl - LBP_SIZE - 2) // stride + 1), max(0, (wl - LBP_SIZE - 2) // stride + 1))
+              for wl, hl in sizes]                                          # each canvas' rows and columns of windows
+    used = [i for i, (rows, cols) in enumerate(inside) if rows and cols]
+    out = [(np.zeros((0, 4)), np.zeros(0))] * len(canvases)
+    if not used:
+        return out
+    left = np.cumsum([0] + [-(-sizes[i][0] // stride) * stride for i in used])   # each level's x in the atlas
+    width, height = int(left[-1]), max(sizes[i][1] for i in used)
+    texture = np.zeros((height, width), np.uint8) if cascade.feature_set != "contour" else None
+    contour = np.zeros((2 * height, 2 * width), np.uint8) if cascade.feature_set != "lbp" else None
+    for i, x in zip(used, left):
+        wl, hl = sizes[i]
+        gray = to_gray(canvases[i][0])
+        if texture is not None:
+            texture[:hl, x:x + wl] = resize_area(gray, (wl, hl))
+        if contour is not None:
+            contour[:2 * hl, 2 * x:2 * (x + wl)] = resize_area(gray, (2 * wl, 2 * hl))
+    packed = cascade.packed()
+    scan = LevelScan.of_levels(texture, contour, stride, cascade.feature_set, cascade.edge_threshold, packed.codes)
+    rows, cols = np.array([inside[i] for i in used]).T
+    counts = rows * cols
+    start = np.cumsum(counts) - counts                                   # each canvas' first window in ``first``
+    owner = np.repeat(np.arange(len(used)), counts)                      # its windows, row by row
+    r, c = np.divmod(np.arange(len(owner)) - start[owner], cols[owner])
+    first = r * scan.cols + left[:-1][owner] // stride + c
+    idx, score = scan.evaluate(packed, last_stage_margin, first)
+    position = np.full(scan.n_windows, -1)
+    position[first] = np.arange(len(first))
+    kept = position[idx]                                                 # the passing windows' places in ``first``
+    which = owner[kept]
+    r, c = np.divmod(kept - start[which], cols[which])
+    shape = np.array([canvases[i][0].shape[:2] for i in used], float)    # (height, width)
+    fx = shape[:, 1] / np.array([sizes[i][0] for i in used])
+    fy = shape[:, 0] / np.array([sizes[i][1] for i in used])
+    fx, fy = fx[which], fy[which]
+    boxes = np.column_stack([(c * stride + 1) * fx, (r * stride + 1) * fy, LBP_SIZE * fx, LBP_SIZE * fy])
+    ends = np.searchsorted(which, np.arange(1, len(used)))
+    for i, b, sc in zip(used, np.split(boxes.reshape(-1, 4), ends), np.split(score, ends)):
+        out[i] = (b, sc)
+    return out
+
+
 def scan_cascade(gray: np.ndarray, cascade: Cascade, scale_factor: float = 1.2, stride: int = 4,
                  min_size: float = 0.0, max_size: float = 0.0, last_stage_margin: float = 0.0,
                  with_vectors: bool = False, select=None):
@@ -708,11 +760,17 @@ class Detector:
             jobs = [(view, transposed, back, scale, cfg.stride, turn) for view, transposed, back, turn in views
                     for scale in window_scales(self.window, view.shape[::-1], cfg.scale_factor, self.min_size,
                                                self.max_size)]
-            if cfg.blob_views:
-                jobs += [(canvas, False, back, scale, blob_views.STRIDE, -1)
-                         for canvas, scale, back in self.blob_canvases(image, gray)]
+            blobs = self.blob_canvases(image, gray) if cfg.blob_views else []
             scan = lambda job: scan_level(job[0], self.cascade, job[3], job[4], margin)  # noqa: E731
-            levels = list(self.pool.map(scan, jobs) if self.pool is not None else map(scan, jobs))
+            scan_blobs = lambda: scan_canvases([(canvas, scale) for canvas, scale, _ in blobs],  # noqa: E731
+                                               self.cascade, blob_views.STRIDE, margin)
+            if self.pool is not None:    # the blob views (one scan, scan_canvases) beside the turned views' levels
+                blob_levels = self.pool.submit(scan_blobs)
+                levels, blob_levels = list(self.pool.map(scan, jobs)), blob_levels.result()
+            else:
+                levels, blob_levels = list(map(scan, jobs)), scan_blobs()
+            jobs += [(canvas, False, back, scale, blob_views.STRIDE, -1) for canvas, scale, back in blobs]
+            levels += [(b, sc, None) for b, sc in blob_levels]
             if not jobs:
                 return Windows(np.zeros((0, 4)), np.zeros(0), np.zeros((0, 4, 2)))
             return Windows(*self._mapped_back(jobs, levels, gray.shape[::-1]))

@@ -220,6 +220,33 @@ class LevelScan:
 
     def __init__(self, frame_gray: np.ndarray, level_size: tuple[int, int], stride: int,
                  feature_set: str, edge_threshold: float, codes: np.ndarray | None = None):
+        frame_gray = _gray(frame_gray)
+        self._setup(level_size, stride, feature_set, codes)
+        if self.n_windows:
+            wl, hl = level_size
+            self._tables(resize_area(frame_gray, (wl, hl)) if feature_set in ("lbp", "fused") else None,
+                         resize_area(frame_gray, (2 * wl, 2 * hl)) if feature_set in ("contour", "fused") else None,
+                         edge_threshold)
+
+    @classmethod
+    def of_levels(cls, texture: np.ndarray | None, contour: np.ndarray | None, stride: int, feature_set: str,
+                  edge_threshold: float, codes: np.ndarray | None = None) -> "LevelScan":
+        """The scan of a texture level and its contour level resized already (twice its size; each None when the
+        feature set does not use it): e.g. several canvases' levels side by side, whose windows inside one of them
+        see only its pixels."""
+        level = texture if texture is not None else contour[::2, ::2]
+        height, width = level.shape
+        if contour is not None and contour.shape != (2 * height, 2 * width):
+            raise FeatureError(f"the contour level must be twice the texture level's {width}x{height}, "
+                               f"got {contour.shape[1]}x{contour.shape[0]}")
+        scan = cls.__new__(cls)
+        scan._setup((width, height), stride, feature_set, codes)
+        if scan.n_windows:
+            scan._tables(_gray(texture) if feature_set in ("lbp", "fused") else None,
+                         _gray(contour) if feature_set in ("contour", "fused") else None, edge_threshold)
+        return scan
+
+    def _setup(self, level_size: tuple[int, int], stride: int, feature_set: str, codes: np.ndarray | None) -> None:
         if BLOCK % stride:
             raise FeatureError(f"stride {stride} must divide the block size {BLOCK}")
         feature_range(feature_set)
@@ -229,7 +256,6 @@ class LevelScan:
             raise FeatureError(f"codes must be distinct sorted LBP codes in 0..255, got {codes}")
         self.plane_of = np.full(N_CODES, -1, np.int64)     # code -> its plane in ``blocks`` (-1: not kept)
         self.plane_of[self.codes] = np.arange(len(self.codes))
-        frame_gray = _gray(frame_gray)
         wl, hl = level_size
         self.stride, self.feature_set = stride, feature_set
         self.level_size = (wl, hl)
@@ -237,12 +263,12 @@ class LevelScan:
         self.rows = max(0, (hl - LBP_SIZE - 2) // stride + 1)
         self.cols = max(0, (wl - LBP_SIZE - 2) // stride + 1)
         self.m_lbp = self.m_contour = None
-        if self.rows == 0 or self.cols == 0:
-            return
-        if feature_set in ("lbp", "fused"):
-            self._texture(resize_area(frame_gray, (wl, hl)))
-        if feature_set in ("contour", "fused"):
-            self._contour(resize_area(frame_gray, (2 * wl, 2 * hl)), edge_threshold)
+
+    def _tables(self, texture: np.ndarray | None, contour: np.ndarray | None, edge_threshold: float) -> None:
+        if texture is not None:
+            self._texture(texture)
+        if contour is not None:
+            self._contour(contour, edge_threshold)
 
     @property
     def n_windows(self) -> int:
@@ -275,8 +301,10 @@ class LevelScan:
         self.m_contour = _contour_maxima(self.px, self.py, s2, n, self.rows, self.cols)
         self._y0, self._x0 = y0, x0
 
-    def evaluate(self, stages: PackedStages, last_stage_margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        """Run a cascade on every window of the level: ``(passing window indices, last-stage score)``.
+    def evaluate(self, stages: PackedStages, last_stage_margin: float = 0.0,
+                 windows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Run a cascade on every window of the level (or only on ``windows``, flat indices, passing ones returned in
+        their order): ``(passing window indices, last-stage score)``.
 
         Exactly the test of :meth:`Cascade.evaluate_vectors` on :meth:`vectors` (``255 v_k >= t max``
         in integers), stage by stage over the windows still alive (Viola-Jones' early exit), compiled
@@ -296,8 +324,15 @@ class LevelScan:
             self.rows, self.cols, BLOCK // self.stride,
             self._x0 if self.m_contour is not None else empty_i64,
             self._y0 if self.m_contour is not None else empty_i64,
+            np.arange(self.n_windows) if windows is None else self._windows(windows),
             stages.features, stages.thresholds, stages.left, stages.right, stages.ends, stages.stage_thresholds,
             float(last_stage_margin))
+
+    def _windows(self, windows) -> np.ndarray:
+        chosen = np.array(windows, np.int64).reshape(-1)        # a copy: the kernel compacts it in place
+        if len(chosen) and (chosen.min() < 0 or chosen.max() >= self.n_windows):
+            raise FeatureError(f"window indices must lie in 0..{self.n_windows - 1}")
+        return chosen
 
     def vectors(self, windows: np.ndarray) -> np.ndarray:
         """Full normalised 1152-d vectors (uint8, floored) of some windows, for training (a scan keeping every code)."""
@@ -514,9 +549,9 @@ def _code_planes(codes, cell, rows, cols, kept):
 
 
 @numba.njit(cache=True, nogil=True)
-def _evaluate_level(blocks, plane_of, px, py, m_lbp, m_contour, rows, cols, cells_per_block, x0, y0,
+def _evaluate_level(blocks, plane_of, px, py, m_lbp, m_contour, rows, cols, cells_per_block, x0, y0, alive,
                     features, thresholds, left, right, ends, stage_thresholds, last_stage_margin):
-    """The cascade over every window of a level (see :meth:`LevelScan.evaluate`).
+    """The cascade over the windows ``alive`` of a level (flat indices; see :meth:`LevelScan.evaluate`).
 
     Stump j reads raw feature ``features[j]`` of a window: texture bin (block, code) from
     ``blocks[plane_of[code]]``, contour potential ``P_x(k)`` from ``px`` or ``P_y(k)`` from ``py``; it tests
@@ -532,21 +567,21 @@ def _evaluate_level(blocks, plane_of, px, py, m_lbp, m_contour, rows, cols, cell
     (left, right) indexed by the test's 0 or 1: the tests are as often true as false, and a branch on them
     was mispredicted about half the time (session 47: 1.75x faster over a UAV frame's 32 levels, same bits).
     """
-    n = rows * cols
-    alive = np.arange(n)
+    n = len(alive)                       # the windows to run it on (flat indices, compacted in place)
     bw, pxw, pyw = blocks.shape[2], px.shape[1], py.shape[1]
     base_l = np.empty(n, np.int64)       # blocks[code].flat offset of the window's top-left block
     base_x = np.empty(n, np.int64)       # px.flat offset of (row, x0[col])
     base_y = np.empty(n, np.int64)       # py.flat offset of (y0[row], col)
     ml = np.empty(n, np.int32)
     mc = np.empty(n, np.int32)
-    for w in range(n):
+    for a in range(n):
+        w = alive[a]
         r, c = w // cols, w % cols
-        base_l[w] = r * bw + c
-        base_x[w] = r * pxw + x0[c] if len(x0) == cols else 0
-        base_y[w] = y0[r] * pyw + c if len(y0) == rows else 0
-        ml[w] = m_lbp[w] if len(m_lbp) == n else 0
-        mc[w] = m_contour[w] if len(m_contour) == n else 0
+        base_l[a] = r * bw + c
+        base_x[a] = r * pxw + x0[c] if len(x0) == cols else 0
+        base_y[a] = y0[r] * pyw + c if len(y0) == rows else 0
+        ml[a] = m_lbp[w] if len(m_lbp) == rows * cols else 0
+        mc[a] = m_contour[w] if len(m_contour) == rows * cols else 0
     flat_px, flat_py = px.ravel(), py.ravel()
     plane_size = blocks.shape[1] * bw
     flat_blocks = blocks.ravel()

@@ -90,6 +90,31 @@ def test_level_scan_equals_reference_window_by_window(stride):
             assert np.array_equal(kept_idx, idx) and np.array_equal(kept_score, score)
 
 
+def test_level_scan_of_some_windows_and_of_levels_resized_already():
+    """evaluate(windows=...) keeps the full scan's passing windows among them, in their order; a scan of the two levels
+    resized already is the scan of the frame; a contour level not twice the texture level, or a window index outside
+    the level, is refused."""
+    rng = np.random.default_rng(8)
+    frame = cv2.GaussianBlur(rng.integers(0, 255, (150, 190), dtype=np.uint8), (5, 5), 1.5)
+    scan = F.LevelScan(frame, (121, 97), 4, "fused", 12.0)
+    every = scan.vectors(np.arange(scan.n_windows))
+    cascade = Cascade((32, 32), "fused", 12.0, [_random_stage(rng, every)])
+    idx, score = scan.evaluate(cascade.packed())
+    chosen = rng.permutation(scan.n_windows)[:scan.n_windows // 2]
+    some_idx, some_score = scan.evaluate(cascade.packed(), windows=chosen)
+    wanted = [w for w in chosen if w in set(idx.tolist())]
+    assert 0 < len(wanted) < len(chosen) and np.array_equal(some_idx, wanted)
+    assert np.array_equal(some_score, score[np.searchsorted(idx, wanted)])
+    texture = cv2.resize(frame, (121, 97), interpolation=cv2.INTER_AREA)
+    contour = cv2.resize(frame, (242, 194), interpolation=cv2.INTER_AREA)
+    again = F.LevelScan.of_levels(texture, contour, 4, "fused", 12.0)
+    assert np.array_equal(again.evaluate(cascade.packed())[0], idx)
+    with pytest.raises(F.FeatureError, match="twice"):
+        F.LevelScan.of_levels(texture, contour[:-2], 4, "fused", 12.0)
+    with pytest.raises(F.FeatureError, match="window indices"):
+        scan.evaluate(cascade.packed(), windows=[0, scan.n_windows])
+
+
 def test_level_scan_refuses_what_its_kept_code_planes_cannot_give():
     """A scan keeping some codes' planes refuses a cascade reading another code, and the full training vectors;
     codes outside 0..255, repeated or unsorted are refused when it is built."""

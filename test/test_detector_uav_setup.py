@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import cv2
 import numpy as np
 import pytest
 
@@ -186,6 +187,42 @@ def test_the_colour_blobs_views_find_more_vehicles_on_held_out_scenes(detector, 
         assert not before.config.blob_views and before.config.group_shape == with_blobs.config.group_shape
         assert_side_by_side(counts_of, with_blobs, before, gain=0.025 if grouped_as_then else -0.02, slack=0.03,
                             context=(with_blobs.config.group_shape,))
+
+
+def test_the_blob_views_scanned_in_one_atlas_give_each_views_own_windows(detector, held_out_frames):
+    """scan_canvases (every blob view's level side by side in one scan) gives each view the windows and scores
+    scan_level gives it alone, at the blob views' stride and at the set-up's, for the set-up's cascade and for its
+    first stage read as fused, LBP-only and contour-only features with every window passing (so that each window's
+    score shows its features); a view too small for a window gets none."""
+    from multi_target_tracker import blob_views
+    from multi_target_tracker.detector import scan_canvases, scan_level
+
+    image = held_out_frames[HELD_OUT[0]][2][0]
+    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    canvases = [(canvas, scale) for canvas, scale, _ in detector.blob_canvases(image, gray)]
+    canvases.append((gray[:20, :30], 1.0))                               # holds no window at any scale
+    assert len(canvases) > 10
+    cascade = detector.cascade
+    # the same stumps, each read as the half's own kind of feature (LBP bins 0..1023, potentials 1024..1151)
+    first = cascade.stages[0]
+    as_lbp = dataclasses.replace(first, features=np.where(first.features < 1024, first.features, first.features - 1024))
+    as_contour = dataclasses.replace(first, features=np.where(first.features >= 1024, first.features,
+                                                              1024 + first.features % 128))
+    every_window = -1e9                          # a one-stage cascade's last-stage margin that passes every window
+    models = [(cascade, detector.config.window_margin),
+              (Cascade(cascade.window, "fused", cascade.edge_threshold, [first]), every_window),
+              (Cascade(cascade.window, "lbp", cascade.edge_threshold, [as_lbp]), every_window),
+              (Cascade(cascade.window, "contour", cascade.edge_threshold, [as_contour]), every_window)]
+    windows = 0
+    for model, margin in models:
+        for stride in (blob_views.STRIDE, 8):
+            together = scan_canvases(canvases, model, stride, margin)
+            for (canvas, scale), (boxes, scores) in zip(canvases, together):
+                alone_boxes, alone_scores, _ = scan_level(canvas, model, scale, stride, margin)
+                assert np.array_equal(boxes, alone_boxes) and np.array_equal(scores, alone_scores)
+                windows += len(boxes)
+            assert len(together[-1][0]) == 0
+    assert windows > 100                        # the comparison is not between empty lists
 
 
 def test_grouping_by_turned_rectangles_keeps_the_detections_on_held_out_scenes(detector, counts_of):
