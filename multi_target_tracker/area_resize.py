@@ -111,14 +111,17 @@ def _axis_weights(source: int, destination: int, scale: float):
     return area_weights(source, destination, scale)
 
 
-def resize_area(gray: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+def resize_area(gray: np.ndarray, size: tuple[int, int], transposed: np.ndarray | None = None) -> np.ndarray:
     """``cv2.resize(gray, size, interpolation=cv2.INTER_AREA)`` of a uint8 grey image, the same bits; ``size`` is
-    ``(width, height)``."""
+    ``(width, height)``. ``transposed``: ``gray``'s transpose, C-contiguous, when the caller has it (a pyramid resizes
+    one view to many levels, and the detector scans the transposed view too)."""
     height, width = gray.shape
     new_width, new_height = size
     scale_x, scale_y = 1.0 / (new_width / width), 1.0 / (new_height / height)   # as OpenCV: 1 / its inverse scale
     whole = abs(scale_x - round(scale_x)) < np.finfo(float).eps and abs(scale_y - round(scale_y)) < np.finfo(float).eps
     if gray.dtype != np.uint8 or scale_x < 1 or scale_y < 1 or whole:
         return cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
-    horizontal = _horizontal(cv2.transpose(gray), *_axis_weights(width, new_width, scale_x))
+    if transposed is None or transposed.shape != (width, height) or not transposed.flags.c_contiguous:
+        transposed = cv2.transpose(gray)
+    horizontal = _horizontal(transposed, *_axis_weights(width, new_width, scale_x))
     return _vertical(cv2.transpose(horizontal), *_axis_weights(height, new_height, scale_y))

@@ -87,6 +87,19 @@ class DetectorError(ValueError):
     """Bad detector input (image, region of interest) or configuration."""
 
 
+class _Job(NamedTuple):
+    """One scan of :meth:`Detector.raw`: a view (or blob canvas) at one scale; the jobs of one ``key`` (a turned view's
+    levels, both orientations; -1 the blob views) are mapped back to the frame at once."""
+
+    image: np.ndarray
+    transposed: bool                 # the view is the frame's transpose: its windows' x and y swap back
+    back: np.ndarray | None          # the view's 2x3 map back to the frame (None: the frame itself)
+    scale: float
+    stride: int
+    key: int
+    image_transposed: np.ndarray | None   # the view's transpose, when the detector has it (the other orientation)
+
+
 class Windows(NamedTuple):
     """The windows a cascade passes in one frame (:meth:`Detector.raw`): their upright boxes ``(n, 4)`` x, y, w, h
     in the frame, last-stage margins ``(n,)`` and turned corners ``(n, 4, 2)`` (the window's own rectangle as its
@@ -409,16 +422,17 @@ def map_back(boxes: np.ndarray, scores: np.ndarray, back: np.ndarray, frame_size
 
 
 def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4, last_stage_margin: float = 0.0,
-               with_vectors: bool = False, select=None):
+               with_vectors: bool = False, select=None, transposed: np.ndarray | None = None):
     """The windows of one pyramid level (window = ``scale * cascade.window`` px) that the cascade passes:
     ``(boxes (n,4) xywh, scores, vectors|None)``. ``select(boxes) -> indices`` (training) picks which
-    are returned."""
+    are returned. ``transposed``: ``gray``'s transpose, when the caller has it."""
     height, width = gray.shape
     w0, h0 = cascade.window
     level = (int(round(width * LBP_SIZE / (w0 * scale))), int(round(height * LBP_SIZE / (h0 * scale))))
     packed = cascade.packed()
     scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold,
-                     None if with_vectors else packed.codes)   # detection keeps the planes of the codes it reads
+                     None if with_vectors else packed.codes,   # detection keeps the planes of the codes it reads
+                     transposed)
     idx, score = (scan.evaluate(packed, last_stage_margin) if scan.n_windows
                   else (np.zeros(0, np.int64), np.zeros(0)))
     fx, fy = width / max(level[0], 1), height / max(level[1], 1)
@@ -754,14 +768,20 @@ class Detector:
         views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         if self.cascade is not None:   # every (view, level) is one job; merged in job order either way
             turned = [turned_view(gray, angle, cfg.border, cfg.turned_crop) for angle in self.angles]
-            views = [(np.ascontiguousarray(v.T) if transposed else v, transposed, back, turn) for turn, (v, back)
-                     in enumerate(turned) for transposed in ((False, True) if self.both_orientations else (False,))]
-            # a job: (image, transposed, back, scale, stride, key); the jobs of one key are mapped back at once
-            jobs = [(view, transposed, back, scale, cfg.stride, turn) for view, transposed, back, turn in views
+            views = []                   # (view, transposed, back, key, the view's transpose if at hand)
+            for turn, (v, back) in enumerate(turned):
+                if self.both_orientations:
+                    v_t = np.ascontiguousarray(v.T)
+                    views += [(v, False, back, turn, v_t), (v_t, True, back, turn, v)]
+                else:
+                    views.append((v, False, back, turn, None))
+            jobs = [_Job(view, transposed, back, scale, cfg.stride, turn, other)
+                    for view, transposed, back, turn, other in views
                     for scale in window_scales(self.window, view.shape[::-1], cfg.scale_factor, self.min_size,
                                                self.max_size)]
             blobs = self.blob_canvases(image, gray) if cfg.blob_views else []
-            scan = lambda job: scan_level(job[0], self.cascade, job[3], job[4], margin)  # noqa: E731
+            scan = lambda job: scan_level(job.image, self.cascade, job.scale, job.stride, margin,  # noqa: E731
+                                          transposed=job.image_transposed)
             scan_blobs = lambda: scan_canvases([(canvas, scale) for canvas, scale, _ in blobs],  # noqa: E731
                                                self.cascade, blob_views.STRIDE, margin)
             if self.pool is not None:    # the blob views (one scan, scan_canvases) beside the turned views' levels
@@ -769,7 +789,7 @@ class Detector:
                 levels, blob_levels = list(self.pool.map(scan, jobs)), blob_levels.result()
             else:
                 levels, blob_levels = list(map(scan, jobs)), scan_blobs()
-            jobs += [(canvas, False, back, scale, blob_views.STRIDE, -1) for canvas, scale, back in blobs]
+            jobs += [_Job(canvas, False, back, scale, blob_views.STRIDE, -1, None) for canvas, scale, back in blobs]
             levels += [(b, sc, None) for b, sc in blob_levels]
             if not jobs:
                 return Windows(np.zeros((0, 4)), np.zeros(0), np.zeros((0, 4, 2)))
@@ -788,12 +808,12 @@ class Detector:
     def _mapped_back(jobs: list, levels: list, frame: tuple[int, int]):
         """The jobs' windows in the frame, in job order (:func:`map_back`): a turned view's levels share its map and
         are mapped at once, the blob views all at once with one map per window (70 calls a UAV frame were 6 ms)."""
-        boxes = [b[:, [1, 0, 3, 2]] if job[1] else b for job, (b, _, _) in zip(jobs, levels)]
+        boxes = [b[:, [1, 0, 3, 2]] if job.transposed else b for job, (b, _, _) in zip(jobs, levels)]
         mapped = []
-        for key, members in itertools.groupby(range(len(jobs)), key=lambda i: jobs[i][5]):
+        for key, members in itertools.groupby(range(len(jobs)), key=lambda i: jobs[i].key):
             members = list(members)
-            back = jobs[members[0]][2] if key >= 0 else \
-                np.repeat(np.stack([jobs[i][2] for i in members]), [len(boxes[i]) for i in members], axis=0)
+            back = jobs[members[0]].back if key >= 0 else \
+                np.repeat(np.stack([jobs[i].back for i in members]), [len(boxes[i]) for i in members], axis=0)
             mapped.append(map_back(np.concatenate([boxes[i] for i in members]).reshape(-1, 4),
                                    np.concatenate([levels[i][1] for i in members]), back, frame, with_quads=True))
         return tuple(np.concatenate([m[k] for m in mapped]) for k in range(3))

@@ -215,18 +215,20 @@ class LevelScan:
     *code* position at ``(row * stride, col * stride)`` (pixel ``+1`` in ``gray_l``), ``stride``
     dividing 16 so that every block lies on the histogram cell grid. ``codes``: the LBP codes whose block
     planes are kept (a cascade's :attr:`PackedStages.codes`: a scan for detection); all 256 by default, which
-    :meth:`vectors` needs.
+    :meth:`vectors` needs. ``frame_transposed``: the frame's transpose when the caller has it (the resizes use it).
     """
 
     def __init__(self, frame_gray: np.ndarray, level_size: tuple[int, int], stride: int,
-                 feature_set: str, edge_threshold: float, codes: np.ndarray | None = None):
+                 feature_set: str, edge_threshold: float, codes: np.ndarray | None = None,
+                 frame_transposed: np.ndarray | None = None):
         frame_gray = _gray(frame_gray)
         self._setup(level_size, stride, feature_set, codes)
         if self.n_windows:
             wl, hl = level_size
-            self._tables(resize_area(frame_gray, (wl, hl)) if feature_set in ("lbp", "fused") else None,
-                         resize_area(frame_gray, (2 * wl, 2 * hl)) if feature_set in ("contour", "fused") else None,
-                         edge_threshold)
+            self._tables(
+                resize_area(frame_gray, (wl, hl), frame_transposed) if feature_set in ("lbp", "fused") else None,
+                resize_area(frame_gray, (2 * wl, 2 * hl), frame_transposed) if feature_set in ("contour", "fused")
+                else None, edge_threshold)
 
     @classmethod
     def of_levels(cls, texture: np.ndarray | None, contour: np.ndarray | None, stride: int, feature_set: str,

@@ -60,3 +60,14 @@ def test_random_sizes_equal_opencv():
             size = (1, 1) if trial % 8 == 3 else (width, height)
         assert np.array_equal(resize_area(image, size), cv2.resize(image, size, interpolation=cv2.INTER_AREA)), \
             (width, height, size)
+
+
+def test_a_given_transpose_gives_the_same_bits_and_a_wrong_one_is_not_used():
+    """The detector passes each view's transpose (its other orientation) so that every level does not transpose the
+    view again: the result is the same; a transpose of the wrong shape or layout is ignored, not read."""
+    rng = np.random.default_rng(11)
+    gray = cv2.GaussianBlur(rng.integers(0, 256, (123, 157), dtype=np.uint8), (3, 3), 1.0)
+    want = cv2.resize(gray, (61, 47), interpolation=cv2.INTER_AREA)
+    assert np.array_equal(resize_area(gray, (61, 47), np.ascontiguousarray(gray.T)), want)
+    for wrong in (np.zeros((123, 157), np.uint8), gray.T, np.zeros((157, 124), np.uint8)):
+        assert np.array_equal(resize_area(gray, (61, 47), wrong), want)
