@@ -294,30 +294,32 @@ def main() -> int:
     cv2.setNumThreads(1)
     seeds = eval_seeds(args.quick)
     det = setup_detector()
-    # no altitude prior: every window size from the model's own window up to the frame
-    full = variant(det, {"min_size": float(det.window[1]), "max_size": 1e4})
-    former = Detector(DetectorConfig(**FORMER))
-    upright = Detector(DetectorConfig(**UPRIGHT))
-    previous = variant(det, PREVIOUS)
-    before_blobs = variant(det, BEFORE_BLOBS)
-    upright_groups = variant(det, UPRIGHT_GROUPS)
-    before_patch_net = variant(det, BEFORE_PATCH_NET)
-    cascade_only = variant(det, CASCADE_ONLY)
-    verifier_only = variant(det, VERIFIER_ONLY)
-    logistic = variant(det, LOGISTIC)
-    other = variant(det, {"model": args.other_seed_model}) if args.other_seed_model else None
+    # the table's rows: results key -> detector, each run on every evaluation seed's frames (full_pyramid on every 4th)
+    rows = {"setup_results": det,
+            # no altitude prior: every window size from the model's own window up to the frame
+            "full_pyramid": variant(det, {"min_size": float(det.window[1]), "max_size": 1e4}),
+            "before_patch_net": variant(det, BEFORE_PATCH_NET),
+            "upright_groups": variant(det, UPRIGHT_GROUPS),
+            "before_blobs": variant(det, BEFORE_BLOBS),
+            "cascade_only": variant(det, CASCADE_ONLY),
+            "verifier_only": variant(det, VERIFIER_ONLY),
+            "logistic": variant(det, LOGISTIC),
+            "upright": Detector(DetectorConfig(**UPRIGHT)),
+            "previous": variant(det, PREVIOUS)}
+    if args.other_seed_model:
+        rows["other_seed"] = variant(det, {"model": args.other_seed_model})
+    former = Detector(DetectorConfig(**FORMER))         # at its own altitude, on a few seeds only
     # compile and load every path before timing (the scan, the blobs' views, grouping, verifier, network): a frame of
     # a tuning scene, not an evaluation one. A blank frame left the blob and group paths to the first evaluation seed,
     # whose frames/s (1.6 against 4.2-6.2 in session 45's run) then pulled the mean over seeds down
     warm_up = frames_of(TUNING[0][0], TUNING[0][1], UAV_SETUP_GROUND_RESOLUTION, frames=8)[0][0]
-    for detector in (det, full, former, upright, previous, before_blobs, upright_groups, before_patch_net,
-                     cascade_only, verifier_only, logistic, other):
-        if detector is not None:
-            detector.detect(warm_up)
+    for detector in (*rows.values(), former):
+        detector.detect(warm_up)
+    keys = list(dict.fromkeys((*rows, "former", "other_seed")))      # every row of the JSON, run or not
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
-               "heights": {}, "seeds": [], "setup_results": [], "full_pyramid": [], "before_patch_net": [], "upright_groups": [], "before_blobs": [], "cascade_only": [], "verifier_only": [], "logistic": [], "previous": [], "upright": [], "former": [], "other_seed": [],
+               "heights": {}, "seeds": [], **{key: [] for key in keys},
                "other_seed_model": args.other_seed_model}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
@@ -327,31 +329,21 @@ def main() -> int:
     for seed, difficulty in seeds:
         items = frames_of(seed, difficulty, UAV_SETUP_GROUND_RESOLUTION)
         results["seeds"].append({"seed": seed, "difficulty": difficulty})
-        results["setup_results"].append(run(det, items))
-        results["full_pyramid"].append(run(full, items[::4]))      # speed and false alarms without the size prior
-        results["before_patch_net"].append(run(before_patch_net, items))
-        results["upright_groups"].append(run(upright_groups, items))
-        results["before_blobs"].append(run(before_blobs, items))
-        results["cascade_only"].append(run(cascade_only, items))
-        results["verifier_only"].append(run(verifier_only, items))
-        results["logistic"].append(run(logistic, items))
-        results["upright"].append(run(upright, items))
-        results["previous"].append(run(previous, items))
-        if other is not None:
-            results["other_seed"].append(run(other, items))
+        for key, detector in rows.items():
+            results[key].append(run(detector, items[::4] if key == "full_pyramid" else items))
         if difficulty == 1 and len(results["former"]) < (2 if args.quick else 3):
             results["former"].append(run(former, frames_of(seed, difficulty, 1.0)[::2]))
         r = results["setup_results"][-1]
         print(f"seed {seed} (difficulty {difficulty}): detection {r['detection_rate']:.3f}, false alarms "
               f"{r['false_alarm_rate']:.3f}, {r['fps']:.1f} frames/s", flush=True)
-    for key in ("setup_results", "full_pyramid", "before_patch_net", "upright_groups", "before_blobs", "cascade_only", "verifier_only", "logistic", "previous", "upright", "former", "other_seed"):
+    for key in keys:
         if results[key]:
             results[key + "_summary"] = spread(results[key])
     # group confidences of the verifier's groups as they were compared (mean boxes, box_scale 0.9)
-    results["confidences"] = confidence_summary(confidence_runs(verifier_only, TUNING),
-                                                confidence_runs(verifier_only, seeds))
-    results["misses"] = {"tuning": miss_breakdown({"setup": det, "before_patch_net": before_patch_net,
-                                                    "before_blobs": before_blobs, "logistic": logistic, "verifier_only": verifier_only}, TUNING)}
+    results["confidences"] = confidence_summary(confidence_runs(rows["verifier_only"], TUNING),
+                                                confidence_runs(rows["verifier_only"], seeds))
+    results["misses"] = {"tuning": miss_breakdown({"setup": det, **{key: rows[key] for key in (
+        "before_patch_net", "before_blobs", "logistic", "verifier_only")}}, TUNING)}
     results["setup_results_difficulty_1_summary"] = spread(
         [r for r, s in zip(results["setup_results"], results["seeds"]) if s["difficulty"] == 1])
     (HERE / "results").mkdir(exist_ok=True)
