@@ -450,7 +450,9 @@ def scan_canvases(canvases: list[tuple[np.ndarray, float]], cascade: Cascade, st
     """:func:`scan_level` of each ``(canvas, scale)``, ``(boxes, scores)`` a canvas: the same windows and scores, from
     one :class:`LevelScan` of their levels side by side (each at a multiple of ``stride``, so that it keeps its window
     grid; only the windows inside one canvas are scored, and they see its pixels only). The blob views are many and
-    small (about 37 a UAV frame): one scan each spent more on its fixed costs than on its pixels."""
+    small (about 37 a UAV frame): one scan each spent more on its fixed costs than on its pixels. Their levels are all
+    about one size (each is scanned at the scale that makes its window 32x32), so the atlas, as tall as the tallest,
+    holds little but them."""
     w0, h0 = cascade.window
     sizes = [(int(round(c.shape[1] * LBP_SIZE / (w0 * s))), int(round(c.shape[0] * LBP_SIZE / (h0 * s))))
              for c, s in canvases]
