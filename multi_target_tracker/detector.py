@@ -72,7 +72,7 @@ from aircraft_docking_tracker.object_table import DETECTION_DTYPE, FLAGGED_DETEC
 from multi_target_tracker import blob_views
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.area_resize import resize_area
-from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan
+from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan, window_grid
 from multi_target_tracker.heading import turned_canvas
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
 from multi_target_tracker.patch_net import PatchNet, PatchNetError
@@ -427,8 +427,7 @@ def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4
     ``(boxes (n,4) xywh, scores, vectors|None)``. ``select(boxes) -> indices`` (training) picks which
     are returned. ``transposed``: ``gray``'s transpose, when the caller has it."""
     height, width = gray.shape
-    w0, h0 = cascade.window
-    level = (int(round(width * LBP_SIZE / (w0 * scale))), int(round(height * LBP_SIZE / (h0 * scale))))
+    level = level_size(gray.shape, cascade.window, scale)
     packed = cascade.packed()
     scan = LevelScan(gray, level, stride, cascade.feature_set, cascade.edge_threshold,
                      None if with_vectors else packed.codes,   # detection keeps the planes of the codes it reads
@@ -436,13 +435,26 @@ def scan_level(gray: np.ndarray, cascade: Cascade, scale: float, stride: int = 4
     idx, score = (scan.evaluate(packed, last_stage_margin) if scan.n_windows
                   else (np.zeros(0, np.int64), np.zeros(0)))
     fx, fy = width / max(level[0], 1), height / max(level[1], 1)
-    origin = scan.window_origins(idx)
-    boxes = np.column_stack([origin[:, 0] * fx, origin[:, 1] * fy,
-                             np.full(len(idx), LBP_SIZE * fx), np.full(len(idx), LBP_SIZE * fy)]).reshape(-1, 4)
+    boxes = _window_boxes(scan.window_origins(idx), fx, fy)
     if select is not None and len(idx):
         chosen = np.asarray(select(boxes), int)
         idx, score, boxes = idx[chosen], score[chosen], boxes[chosen]
     return boxes, score, (scan.vectors(idx) if with_vectors else None)
+
+
+def level_size(shape: tuple[int, ...], window: tuple[int, int], scale: float) -> tuple[int, int]:
+    """(width, height) of the texture level of an image of ``shape`` (height, width, ...) at which a window of
+    ``scale * window`` px becomes 32x32."""
+    (w0, h0), (height, width) = window, shape[:2]
+    return int(round(width * LBP_SIZE / (w0 * scale))), int(round(height * LBP_SIZE / (h0 * scale)))
+
+
+def _window_boxes(origin: np.ndarray, fx, fy) -> np.ndarray:
+    """``(n, 4)`` boxes x, y, w, h in the image of windows whose texture-level top-left pixels are ``origin`` ``(n, 2)``,
+    the image being ``fx`` x ``fy`` times the level (numbers, or one per window)."""
+    n = len(origin)
+    return np.column_stack([origin[:, 0] * fx, origin[:, 1] * fy, np.broadcast_to(LBP_SIZE * fx, n),
+                            np.broadcast_to(LBP_SIZE * fy, n)]).reshape(-1, 4)
 
 
 def scan_canvases(canvases: list[tuple[np.ndarray, float]], cascade: Cascade, stride: int = 4,
@@ -453,11 +465,8 @@ def scan_canvases(canvases: list[tuple[np.ndarray, float]], cascade: Cascade, st
     small (about 37 a UAV frame): one scan each spent more on its fixed costs than on its pixels. Their levels are all
     about one size (each is scanned at the scale that makes its window 32x32), so the atlas, as tall as the tallest,
     holds little but them."""
-    w0, h0 = cascade.window
-    sizes = [(int(round(c.shape[1] * LBP_SIZE / (w0 * s))), int(round(c.shape[0] * LBP_SIZE / (h0 * s))))
-             for c, s in canvases]
-    inside = [(max(0, (hl - LBP_SIZE - 2) // stride + 1), max(0, (wl - LBP_SIZE - 2) // stride + 1))
-              for wl, hl in sizes]                                          # each canvas' rows and columns of windows
+    sizes = [level_size(canvas.shape, cascade.window, scale) for canvas, scale in canvases]
+    inside = [window_grid(size, stride) for size in sizes]             # each canvas' rows and columns of windows
     used = [i for i, (rows, cols) in enumerate(inside) if rows and cols]
     out = [(np.zeros((0, 4)), np.zeros(0))] * len(canvases)
     if not used:
@@ -491,9 +500,9 @@ def scan_canvases(canvases: list[tuple[np.ndarray, float]], cascade: Cascade, st
     fx = shape[:, 1] / np.array([sizes[i][0] for i in used])
     fy = shape[:, 0] / np.array([sizes[i][1] for i in used])
     fx, fy = fx[which], fy[which]
-    boxes = np.column_stack([(c * stride + 1) * fx, (r * stride + 1) * fy, LBP_SIZE * fx, LBP_SIZE * fy])
+    boxes = _window_boxes(np.stack([c * stride + 1, r * stride + 1], axis=1).reshape(-1, 2), fx, fy)
     ends = np.searchsorted(which, np.arange(1, len(used)))
-    for i, b, sc in zip(used, np.split(boxes.reshape(-1, 4), ends), np.split(score, ends)):
+    for i, b, sc in zip(used, np.split(boxes, ends), np.split(score, ends)):
         out[i] = (b, sc)
     return out
 
@@ -767,7 +776,6 @@ class Detector:
         """:meth:`raw` of ``image`` whose grey version ``gray`` the caller has already."""
         cfg = self.config
         margin = cfg.window_margin if last_stage_margin is None else last_stage_margin
-        views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         if self.cascade is not None:   # every (view, level) is one job; merged in job order either way
             turned = [turned_view(gray, angle, cfg.border, cfg.turned_crop) for angle in self.angles]
             views = []                   # (view, transposed, back, key, the view's transpose if at hand)
@@ -797,6 +805,7 @@ class Detector:
                 return Windows(np.zeros((0, 4)), np.zeros(0), np.zeros((0, 4, 2)))
             return Windows(*self._mapped_back(jobs, levels, gray.shape[::-1]))
         all_boxes, all_scores = [], []
+        views = [(gray, False)] + ([(np.ascontiguousarray(gray.T), True)] if self.both_orientations else [])
         for view, transposed in views:
             boxes, scores = self.opencv.detect(view, cfg.scale_factor, cfg.min_neighbors, self.min_size, self.max_size)
             if transposed:

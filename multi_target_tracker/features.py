@@ -206,6 +206,13 @@ class PackedStages:
                    np.unique(features[features < LBP_DIM] % N_CODES))
 
 
+def window_grid(level_size: tuple[int, int], stride: int) -> tuple[int, int]:
+    """Rows and columns of the windows of a ``level_size`` (width, height) level on a ``stride`` grid: those whose
+    34x34 texture patch (the 32x32 window and its LBP rim) lies inside it."""
+    width, height = level_size
+    return max(0, (height - LBP_SIZE - 2) // stride + 1), max(0, (width - LBP_SIZE - 2) // stride + 1)
+
+
 class LevelScan:
     """Raw features and eq. 3-4 maxima of every window of one pyramid level, on a stride grid.
 
@@ -261,9 +268,7 @@ class LevelScan:
         wl, hl = level_size
         self.stride, self.feature_set = stride, feature_set
         self.level_size = (wl, hl)
-        # windows whose 34x34 texture patch lies inside the level
-        self.rows = max(0, (hl - LBP_SIZE - 2) // stride + 1)
-        self.cols = max(0, (wl - LBP_SIZE - 2) // stride + 1)
+        self.rows, self.cols = window_grid((wl, hl), stride)
         self.m_lbp = self.m_contour = None
 
     def _tables(self, texture: np.ndarray | None, contour: np.ndarray | None, edge_threshold: float) -> None:
