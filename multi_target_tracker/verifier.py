@@ -1,4 +1,4 @@
-"""Colour verifier of the cascade's groups (pure: numpy, scipy, OpenCV): the UAV set-up's second stage.
+"""Colour verifier of the cascade's groups (pure: numpy, scipy, OpenCV, numba): the UAV set-up's second stage.
 
 The cascade looks at grey texture only (seed 003's LBP and contour features). On the UAV scenes its
 window count does not tell a vehicle from the tree canopy, smoke or a road patch that passes it as
@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
+import numba
 import numpy as np
 from scipy.optimize import minimize
 
@@ -56,13 +57,46 @@ def colour_features(bgr: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         x0, x1 = int(min(max(x + w / 4, 0), width - 1)), int(min(max(x + 3 * w / 4, 0), width - 1))
         y0, y1 = int(min(max(y + h / 4, 0), height - 1)), int(min(max(y + 3 * h / 4, 0), height - 1))
         inner = bgr[y0:max(y1, y0 + 1), x0:max(x1, x0 + 1)]
-        pixels = inner.reshape(-1, 3).astype(np.float64)
-        hsv = cv2.cvtColor(inner, cv2.COLOR_BGR2HSV).reshape(-1, 3).astype(np.float64)
-        hue = hsv[:, 0] * (np.pi / 90.0)            # OpenCV's 8-bit hue is 0..179 for 0..358 degrees
-        out[k] = np.concatenate([pixels.mean(axis=0) / 255, pixels.std(axis=0) / 255,
-                                 [np.mean(np.cos(hue) * hsv[:, 1]) / 255, np.mean(np.sin(hue) * hsv[:, 1]) / 255,
-                                  hsv[:, 1].mean() / 255, hsv[:, 2].std() / 255]])
+        _colour_statistics(inner, cv2.cvtColor(inner, cv2.COLOR_BGR2HSV), _HUE_COS, _HUE_SIN, out[k])
     return out
+
+
+_HUE_COS, _HUE_SIN = np.cos(np.arange(256) * (np.pi / 90.0)), np.sin(np.arange(256) * (np.pi / 90.0))
+"""cos / sin of each 8-bit hue (OpenCV's 0..179 for 0..358 degrees)"""
+
+
+@numba.njit(cache=True, nogil=True)
+def _colour_statistics(bgr, hsv, hue_cos, hue_sin, out):
+    """:func:`colour_features` of one box's pixels ``bgr`` (their HSV ``hsv``) into ``out``: the means and standard
+    deviations (of the population) of B, G, R, the means of cos(hue) S, sin(hue) S and S, the standard deviation of V,
+    each / 255, in float64 (two passes, as NumPy's mean and std; sums in pixel order, NumPy's pairwise order aside).
+    One compiled call a box: the same statistics as NumPy calls took about 230 us a box, 9 ms a UAV frame (session 48)."""
+    height, width = bgr.shape[0], bgr.shape[1]
+    n = height * width
+    total = np.zeros(7)                        # B, G, R, cos S, sin S, S, V
+    for y in range(height):
+        for x in range(width):
+            for c in range(3):
+                total[c] += np.float64(bgr[y, x, c])
+            h, s = hsv[y, x, 0], np.float64(hsv[y, x, 1])
+            total[3] += hue_cos[h] * s
+            total[4] += hue_sin[h] * s
+            total[5] += s
+            total[6] += np.float64(hsv[y, x, 2])
+    mean = total / n
+    spread = np.zeros(4)                       # B, G, R, V squared deviations
+    for y in range(height):
+        for x in range(width):
+            for c in range(3):
+                d = np.float64(bgr[y, x, c]) - mean[c]
+                spread[c] += d * d
+            d = np.float64(hsv[y, x, 2]) - mean[6]
+            spread[3] += d * d
+    for c in range(3):
+        out[c] = mean[c] / 255
+        out[3 + c] = np.sqrt(spread[c] / n) / 255
+    out[6], out[7], out[8] = mean[3] / 255, mean[4] / 255, mean[5] / 255
+    out[9] = np.sqrt(spread[3] / n) / 255
 
 
 def group_features(counts: np.ndarray, margin_sums: np.ndarray, best_margins: np.ndarray) -> np.ndarray:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 
+import cv2
 import numpy as np
 import pytest
 
@@ -43,6 +44,27 @@ def test_colour_features_tell_a_painted_box_from_canopy_and_refuse_grey_images()
         colour_features(image[:, :, 0], np.array([[0, 0, 10, 10]], float))
     edge = colour_features(image, np.array([[190, 90, 40, 40], [-30, -30, 20, 20]], float))   # clipped, no crash
     assert np.isfinite(edge).all()
+
+
+def test_colour_features_are_numpy_s_statistics_of_the_inner_half_of_each_box():
+    """The compiled statistics against NumPy's on OpenCV's HSV, box by box (sums in another order: 1e-12)."""
+    rng = np.random.default_rng(4)
+    image = rng.integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    image[40:80, 50:120] = (30, 60, 200)                            # a flat patch: zero spread
+    boxes = np.array([[10, 20, 80, 60], [57, 45, 40, 20], [150, 110, 30, 30], [-40, -40, 45, 45], [3, 4, 1, 1]],
+                     float)
+    f = colour_features(image, boxes)
+    for k, (x, y, w, h) in enumerate(boxes):
+        x0, x1 = int(np.clip(x + w / 4, 0, 159)), int(np.clip(x + 3 * w / 4, 0, 159))
+        y0, y1 = int(np.clip(y + h / 4, 0, 119)), int(np.clip(y + 3 * h / 4, 0, 119))
+        inner = image[y0:max(y1, y0 + 1), x0:max(x1, x0 + 1)]
+        pixels = inner.reshape(-1, 3).astype(float)
+        hsv = cv2.cvtColor(inner, cv2.COLOR_BGR2HSV).reshape(-1, 3).astype(float)
+        hue = hsv[:, 0] * np.pi / 90
+        expected = np.r_[pixels.mean(axis=0), pixels.std(axis=0), np.mean(np.cos(hue) * hsv[:, 1]),
+                         np.mean(np.sin(hue) * hsv[:, 1]), hsv[:, 1].mean(), hsv[:, 2].std()] / 255
+        assert np.allclose(f[k], expected, rtol=1e-12, atol=1e-14), k
+    assert f[1, 3:6].tolist() == [0, 0, 0] and f[1, :3] == pytest.approx(np.array([30, 60, 200]) / 255)
 
 
 def test_fit_verifier_orders_separable_groups_and_round_trips_through_json(tmp_path):
