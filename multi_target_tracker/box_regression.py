@@ -1,4 +1,4 @@
-"""Box regression of the cascade's groups from their member windows (pure: numpy): the UAV set-up's third step.
+"""Box regression of the cascade's groups from their member windows (pure: numpy, numba): the UAV set-up's third step.
 
 A group's box is the mean of its member windows. On the UAV scenes that box is often off the vehicle's
 upright box (issue 12, tuning seeds 2000-2011 / 2100-2105 at the set-up of session 8: of 406 missed
@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
+import numba
 import numpy as np
 
 from multi_target_tracker.verifier import check_json_model, load_json_model
@@ -120,27 +121,69 @@ def member_features(boxes: np.ndarray, margins: np.ndarray, label: np.ndarray, g
     order = np.argsort(label, kind="stable")
     starts = np.searchsorted(label[order], groups)
     ends = np.searchsorted(label[order], groups, side="right")
-    width, height = frame_size
-    for k, (a, b) in enumerate(zip(starts, ends)):
-        if b <= a:
-            raise BoxRegressorError(f"group {groups[k]} has no member windows")
-        mb, mm = boxes[order[a:b]], margins[order[a:b]]
-        above = np.maximum(mm - margin_floor, 0.0)
-        weight = above / above.sum() if above.sum() > 0 else np.full(len(mm), 1.0 / len(mm))
-        gx, gy, gw, gh = group_boxes[k]
-        gw, gh = max(gw, 1e-6), max(gh, 1e-6)
-        x0, y0, x1, y1 = mb[:, 0], mb[:, 1], mb[:, 0] + mb[:, 2], mb[:, 1] + mb[:, 3]
-        aspect = np.log(np.maximum(mb[:, 2], 1e-6) / np.maximum(mb[:, 3], 1e-6))
-        out[k] = [1.0, math.log(len(mb)), math.log1p(above.sum()), mm.max(), math.log(gw / gh), math.log(gw * gh) / 8,
-                  (percentile(x0, 10) - gx) / gw, (percentile(x1, 90) - gx - gw) / gw,
-                  (percentile(y0, 10) - gy) / gh, (percentile(y1, 90) - gy - gh) / gh,
-                  (x0.min() - gx) / gw, (x1.max() - gx - gw) / gw, (y0.min() - gy) / gh, (y1.max() - gy - gh) / gh,
-                  ((x0 + x1) / 2).std() / gw, ((y0 + y1) / 2).std() / gh, aspect.std(), np.abs(aspect).mean(),
-                  (weight @ x0 - gx) / gw, (weight @ x1 - gx - gw) / gw, (weight @ y0 - gy) / gh,
-                  (weight @ y1 - gy - gh) / gh,
-                  float(gx < BORDER_PX), float(gy < BORDER_PX), float(gx + gw > width - BORDER_PX),
-                  float(gy + gh > height - BORDER_PX)]
+    if np.any(ends <= starts):
+        raise BoxRegressorError(f"group {groups[np.argmax(ends <= starts)]} has no member windows")
+    _member_statistics(boxes, margins, order, starts, ends, group_boxes, float(margin_floor), float(frame_size[0]),
+                       float(frame_size[1]), BORDER_PX, out)
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _linear_percentile(ordered, q):
+    """``np.percentile(values, q)`` (linear) of ``ordered``, the values sorted: :func:`percentile`'s steps, the same
+    bits."""
+    n = len(ordered)
+    index = (n - 1) * (q / 100)
+    if index >= n - 1:
+        return ordered[n - 1]
+    below = math.floor(index)
+    a, b = ordered[below], ordered[below + 1]
+    fraction = index - below
+    return b - (b - a) * (1 - fraction) if fraction >= 0.5 else a + (b - a) * fraction
+
+
+@numba.njit(cache=True, nogil=True)
+def _spread(values):
+    """The population standard deviation (two passes, as NumPy's ``std``)."""
+    mean = values.sum() / len(values)
+    total = 0.0
+    for v in values:
+        total += (v - mean) * (v - mean)
+    return math.sqrt(total / len(values))
+
+
+@numba.njit(cache=True, nogil=True)
+def _member_statistics(boxes, margins, order, starts, ends, group_boxes, margin_floor, width, height, border, out):
+    """:func:`member_features` of each group ``k`` (members ``order[starts[k]:ends[k]]``) into ``out[k]``, in
+    :data:`FEATURES` order. One compiled pass: the same statistics as NumPy calls, about 230 us a group and 9 ms a UAV
+    frame (session 48); the percentiles and extremes have the same bits, the sums and dot products their own order."""
+    for k in range(len(starts)):
+        members = order[starts[k]:ends[k]]
+        n = len(members)
+        mb, mm = boxes[members], margins[members]
+        above = np.maximum(mm - margin_floor, 0.0)
+        mass = above.sum()
+        weight = above / mass if mass > 0 else np.full(n, 1.0 / n)
+        gx, gy = group_boxes[k, 0], group_boxes[k, 1]
+        gw, gh = max(group_boxes[k, 2], 1e-6), max(group_boxes[k, 3], 1e-6)
+        x0, y0 = mb[:, 0].copy(), mb[:, 1].copy()
+        x1, y1 = mb[:, 0] + mb[:, 2], mb[:, 1] + mb[:, 3]
+        aspect = np.log(np.maximum(mb[:, 2], 1e-6) / np.maximum(mb[:, 3], 1e-6))
+        f = out[k]
+        f[0], f[1], f[2], f[3] = 1.0, math.log(n), math.log1p(mass), mm.max()
+        f[4], f[5] = math.log(gw / gh), math.log(gw * gh) / 8
+        f[10], f[11] = (x0.min() - gx) / gw, (x1.max() - gx - gw) / gw
+        f[12], f[13] = (y0.min() - gy) / gh, (y1.max() - gy - gh) / gh
+        f[14], f[15] = _spread((x0 + x1) / 2) / gw, _spread((y0 + y1) / 2) / gh
+        f[16], f[17] = _spread(aspect), np.abs(aspect).sum() / n
+        f[18], f[19] = ((weight * x0).sum() - gx) / gw, ((weight * x1).sum() - gx - gw) / gw
+        f[20], f[21] = ((weight * y0).sum() - gy) / gh, ((weight * y1).sum() - gy - gh) / gh
+        f[22], f[23] = 1.0 if gx < border else 0.0, 1.0 if gy < border else 0.0
+        f[24] = 1.0 if gx + gw > width - border else 0.0
+        f[25] = 1.0 if gy + gh > height - border else 0.0
+        x0.sort(), x1.sort(), y0.sort(), y1.sort()
+        f[6], f[7] = (_linear_percentile(x0, 10) - gx) / gw, (_linear_percentile(x1, 90) - gx - gw) / gw
+        f[8], f[9] = (_linear_percentile(y0, 10) - gy) / gh, (_linear_percentile(y1, 90) - gy - gh) / gh
 
 
 def region_patch(bgr: np.ndarray, box, grow: float, size: int) -> np.ndarray:

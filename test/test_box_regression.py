@@ -75,6 +75,42 @@ def test_member_features_describe_where_the_members_lie():
     assert f[j, name["at_left_border"]] == 1 and f[i, name["at_left_border"]] == 0
 
 
+def test_member_features_are_numpy_s_statistics_of_each_group():
+    """The compiled pass against NumPy's calls, group by group: percentiles and extremes to the bit, sums to 1e-12
+    (their order differs). Groups of 1, 2, 7 and 300 members (NumPy sums 300 values pairwise), ragged labels."""
+    rng = np.random.default_rng(3)
+    sizes = {4: 1, 9: 2, 2: 7, 7: 300}
+    label = rng.permutation(np.repeat(list(sizes), list(sizes.values())))
+    boxes = np.column_stack([rng.uniform(-20, 600, len(label)), rng.uniform(-20, 440, len(label)),
+                             rng.uniform(5, 90, len(label)), rng.uniform(5, 90, len(label))])
+    margins = rng.normal(1.0, 1.0, len(label))
+    margins[label == 9] = 0.5                                   # nothing above the floor: equal weights
+    groups = np.array([7, 2, 9, 4])
+    group_boxes = np.array([boxes[label == g].mean(axis=0) for g in groups])
+    group_boxes[3, :2] = (0.5, 470.0)                           # at the left and bottom borders
+    f = member_features(boxes, margins, label, groups, group_boxes, 0.8, (640, 480))
+    for k, g in enumerate(groups):
+        mb, mm = boxes[label == g], margins[label == g]
+        gx, gy, gw, gh = group_boxes[k]
+        x0, y0, x1, y1 = mb[:, 0], mb[:, 1], mb[:, 0] + mb[:, 2], mb[:, 1] + mb[:, 3]
+        above = np.maximum(mm - 0.8, 0.0)
+        weight = above / above.sum() if above.sum() > 0 else np.full(len(mm), 1 / len(mm))
+        aspect = np.log(mb[:, 2] / mb[:, 3])
+        exact = [(np.percentile(x0, 10) - gx) / gw, (np.percentile(x1, 90) - gx - gw) / gw,
+                 (np.percentile(y0, 10) - gy) / gh, (np.percentile(y1, 90) - gy - gh) / gh,
+                 (x0.min() - gx) / gw, (x1.max() - gx - gw) / gw, (y0.min() - gy) / gh, (y1.max() - gy - gh) / gh]
+        assert f[k, 6:14].tolist() == exact
+        assert f[k, 22:].tolist() == [float(gx < 2), float(gy < 2), float(gx + gw > 638), float(gy + gh > 478)]
+        summed = [1.0, np.log(len(mb)), np.log1p(above.sum()), mm.max(), np.log(gw / gh), np.log(gw * gh) / 8]
+        summed += [((x0 + x1) / 2).std() / gw, ((y0 + y1) / 2).std() / gh, aspect.std(), np.abs(aspect).mean(),
+                   (weight @ x0 - gx) / gw, (weight @ x1 - gx - gw) / gw, (weight @ y0 - gy) / gh,
+                   (weight @ y1 - gy - gh) / gh]
+        assert np.allclose(np.r_[f[k, :6], f[k, 14:22]], summed, rtol=1e-12, atol=1e-12)
+    assert f[3, 22] == 1 and f[3, 25] == 1
+    with pytest.raises(BoxRegressorError):
+        member_features(boxes, margins, label, np.array([7, 5]), group_boxes[:2], 0.8, (640, 480))
+
+
 def test_fit_box_regressor_recovers_a_linear_rule_and_round_trips_through_json(tmp_path):
     rng = np.random.default_rng(1)
     x = rng.normal(size=(500, len(FEATURES)))
