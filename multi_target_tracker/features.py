@@ -34,6 +34,8 @@ tested against.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
+
 import cv2
 import numba
 import numpy as np
@@ -213,6 +215,20 @@ def window_grid(level_size: tuple[int, int], stride: int) -> tuple[int, int]:
     return max(0, (height - LBP_SIZE - 2) // stride + 1), max(0, (width - LBP_SIZE - 2) // stride + 1)
 
 
+@lru_cache(maxsize=16)
+def _kept_planes(codes: bytes | None, dtype: str | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes, plane_of)`` of the LBP codes whose block planes a scan keeps (their array's bytes and dtype; None:
+    all 256), checked once: a detector scans with one cascade's codes every level and frame. ``plane_of[code]`` is the
+    code's plane in ``blocks`` (-1: not kept). Both read-only (shared by the scans)."""
+    kept = np.arange(N_CODES) if codes is None else np.frombuffer(codes, dtype).astype(np.int64).reshape(-1)
+    if len(kept) and (kept.min() < 0 or kept.max() >= N_CODES or np.any(np.diff(kept) <= 0)):
+        raise FeatureError(f"codes must be distinct sorted LBP codes in 0..255, got {kept.tolist()}")
+    plane_of = np.full(N_CODES, -1, np.int64)
+    plane_of[kept] = np.arange(len(kept))
+    kept.flags.writeable = plane_of.flags.writeable = False
+    return kept, plane_of
+
+
 class LevelScan:
     """Raw features and eq. 3-4 maxima of every window of one pyramid level, on a stride grid.
 
@@ -259,12 +275,8 @@ class LevelScan:
         if BLOCK % stride:
             raise FeatureError(f"stride {stride} must divide the block size {BLOCK}")
         feature_range(feature_set)
-        self.codes = np.arange(N_CODES) if codes is None else np.asarray(codes, np.int64).reshape(-1)
-        if len(self.codes) and (self.codes.min() < 0 or self.codes.max() >= N_CODES
-                                or np.any(np.diff(self.codes) <= 0)):
-            raise FeatureError(f"codes must be distinct sorted LBP codes in 0..255, got {codes}")
-        self.plane_of = np.full(N_CODES, -1, np.int64)     # code -> its plane in ``blocks`` (-1: not kept)
-        self.plane_of[self.codes] = np.arange(len(self.codes))
+        self.codes, self.plane_of = _kept_planes(None if codes is None else np.asarray(codes).tobytes(),
+                                                 None if codes is None else np.asarray(codes).dtype.str)
         wl, hl = level_size
         self.stride, self.feature_set = stride, feature_set
         self.level_size = (wl, hl)
