@@ -1,6 +1,6 @@
 """Colour blobs as extra cascade views (issue 12): where to look besides the sliding scan, and along which axis.
 
-Pure (numpy + OpenCV). Seen from above, a vehicle is a compact patch whose colour stands out from the ground
+Pure (numpy, OpenCV, numba). Seen from above, a vehicle is a compact patch whose colour stands out from the ground
 around it. The scan looks at the frame along a few fixed headings (``DetectorConfig.angles``) on a stride grid,
 so a vehicle between two headings, or between two grid positions, may gather too few windows to make a group
 (issue 12's diagnosis: on the tuning frames only 0.82 of the vehicles >= 70 % visible had a group at IoU >= 0.5).
@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 from multi_target_tracker.heading import chip_height, turned_canvas
@@ -82,16 +83,21 @@ def colour_blobs(bgr: np.ndarray, background: float, min_fill: float, window_asp
     mser = cv2.MSER_create(delta=MSER_DELTA, min_area=max(8, int(lo * min_fill)), max_area=max(9, int(hi)),
                            max_variation=MSER_MAX_VARIATION)
     regions, rects = mser.detectRegions(distance)
+    # cheap test first: the pixel centres' rotated rectangle is no larger than their upright box, (w - 1) x (h - 1)
+    rects = np.asarray(rects, np.int64).reshape(-1, 4)
+    tested = np.flatnonzero((rects[:, 2] - 1) * (rects[:, 3] - 1) >= lo)
+    if not len(tested):
+        return []
+    counts = np.array([len(regions[k]) for k in tested])
+    hulls, firsts, sizes = _row_ends(np.concatenate([regions[k] for k in tested]).reshape(-1, 2), counts)
     blobs: list[Blob] = []
-    for points, rect in zip(regions, rects):
-        if rect[2] * rect[3] < lo * min_fill:     # cheap test first: the upright box holds the rotated one
-            continue
+    for count, first, size in zip(counts, firsts, sizes):
         # the rectangle of the pixels' centres (a pixel shorter than their extent: tuned so, see docs/uav_camera.md)
-        (cx, cy), (a, b), angle = cv2.minAreaRect(points)
+        (cx, cy), (a, b), angle = cv2.minAreaRect(hulls[first:first + size])
         length, width = max(a, b), min(a, b)
         if width < 1 or length * width < lo or length * width > hi or length > MAX_ASPECT * width:
             continue
-        fill = len(points) / (length * width)
+        fill = count / (length * width)
         if fill < min_fill:
             continue
         angle = angle if a >= b else angle + 90.0
@@ -104,14 +110,50 @@ def colour_blobs(bgr: np.ndarray, background: float, min_fill: float, window_asp
     return _distinct(sorted(blobs, key=lambda blob: -blob.fill))[:MAX_BLOBS]
 
 
+@numba.njit(cache=True, nogil=True)
+def _row_ends(points, counts):
+    """The first and last pixel of each row of each region (``counts[k]`` points of ``points`` (x, y) after the
+    previous regions'): ``(ends, firsts, sizes)``, region k's ``ends[firsts[k]:firsts[k] + sizes[k]]``. Their convex
+    hull is the region's, so ``cv2.minAreaRect`` gives the region's rectangle from them: about 20 points a region
+    instead of 430, 2.2x faster over a UAV frame's 200 regions (session 48; the same rectangle on 19 744 of 19 749
+    regions, the other five ties of equal area that the hull's other vertex order resolves otherwise)."""
+    ends = np.empty_like(points)
+    firsts, sizes = np.empty(len(counts), np.int64), np.empty(len(counts), np.int64)
+    start = at = 0
+    for k in range(len(counts)):
+        top = bottom = points[start, 1]
+        for i in range(start, start + counts[k]):
+            top, bottom = min(top, points[i, 1]), max(bottom, points[i, 1])
+        left = np.full(bottom - top + 1, np.iinfo(np.int32).max, np.int32)
+        right = np.full(bottom - top + 1, -1, np.int32)
+        for i in range(start, start + counts[k]):
+            row, x = points[i, 1] - top, points[i, 0]
+            left[row], right[row] = min(left[row], x), max(right[row], x)
+        firsts[k] = at
+        for row in range(len(left)):
+            if right[row] >= 0:
+                ends[at, 0], ends[at, 1] = left[row], top + row
+                at += 1
+                if right[row] != left[row]:
+                    ends[at, 0], ends[at, 1] = right[row], top + row
+                    at += 1
+        sizes[k] = at - firsts[k]
+        start += counts[k]
+    return ends, firsts, sizes
+
+
 def _distinct(blobs: list[Blob]) -> list[Blob]:
     """Drop a blob within 3 px and 10 % of the length of a better-filled one (MSER nests near-equal regions)."""
-    kept: list[Blob] = []
-    for blob in blobs:
-        if all(abs(blob.x - k.x) > 3 or abs(blob.y - k.y) > 3 or abs(blob.length - k.length) > 0.1 * k.length
-               for k in kept):
-            kept.append(blob)
-    return kept
+    if not blobs:
+        return []
+    x, y, length = (np.array([getattr(blob, name) for blob in blobs]) for name in ("x", "y", "length"))
+    near = ((np.abs(x[:, None] - x[None, :]) <= 3) & (np.abs(y[:, None] - y[None, :]) <= 3)
+            & (np.abs(length[:, None] - length[None, :]) <= 0.1 * length[None, :]))   # near[i, j]: i by kept j
+    kept: list[int] = []
+    for i in range(len(blobs)):
+        if not near[i, kept].any():
+            kept.append(i)
+    return [blobs[i] for i in kept]
 
 
 def window_height(blob: Blob, window_aspect: float, context: float) -> float:

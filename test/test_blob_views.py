@@ -12,7 +12,7 @@ from aircraft_docking_tracker.geometry import box_iou
 from aircraft_docking_tracker.offline import build_processor
 from aircraft_docking_tracker.scenarios.uav import (UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
                                                     UavSceneConfig)
-from multi_target_tracker.blob_views import MAX_BLOBS, Blob, blob_view, colour_blobs, window_height
+from multi_target_tracker.blob_views import MAX_BLOBS, Blob, _row_ends, blob_view, colour_blobs, window_height
 from multi_target_tracker.detector import Detector, DetectorConfig, DetectorError
 from multi_target_tracker.train_cascade import read_yolo_folder, truncated
 from conftest import require_data
@@ -21,6 +21,30 @@ GROUND = (70, 140, 90)       # BGR: a green field
 PAINT = (190, 70, 40)        # a blue car
 ASPECT, CONTEXT = 2.0, 1.25  # the UAV model's 48x24 window and its chips' context
 SETUP = package_config_dir() / "uav_camera.yaml"
+
+
+def test_the_row_ends_of_each_region_keep_its_convex_hull():
+    """colour_blobs hands cv2.minAreaRect each region's first and last pixel per row: the same hull (vertices and
+    area) as all its pixels, region by region, for blobs, rings, single rows and columns, points in any order."""
+    rng = np.random.default_rng(5)
+    regions = []
+    for k in range(40):
+        mask = np.zeros((40, 50), np.uint8)
+        centre = (int(rng.integers(10, 40)), int(rng.integers(10, 30)))
+        axes = (int(rng.integers(1, 15)), int(rng.integers(0, 12)))
+        cv2.ellipse(mask, centre, axes, float(rng.uniform(0, 180)), 0, 360, 1, -1 if k % 3 else 2)
+        ys, xs = np.nonzero(mask)
+        regions.append(rng.permutation(np.column_stack([xs, ys]).astype(np.int32)))
+    regions += [np.array([[5, 7], [6, 7], [9, 7]], np.int32), np.array([[3, 2], [3, 9], [3, 4]], np.int32)]
+    counts = np.array([len(r) for r in regions])
+    ends, firsts, sizes = _row_ends(np.concatenate(regions), counts)
+    assert sizes.sum() < counts.sum() / 2
+    for region, first, size in zip(regions, firsts, sizes):
+        kept = ends[first:first + size]
+        assert {tuple(p) for p in kept} <= {tuple(p) for p in region}
+        hull, full = cv2.convexHull(kept).reshape(-1, 2), cv2.convexHull(region).reshape(-1, 2)
+        assert {tuple(p) for p in hull} == {tuple(p) for p in full}
+        assert cv2.contourArea(hull) == cv2.contourArea(full)
 
 
 def _field(shape=(480, 640)) -> np.ndarray:
