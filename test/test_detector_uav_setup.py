@@ -22,7 +22,7 @@ from aircraft_docking_tracker.scenarios.uav import (
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS,
     UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
 from multi_target_tracker.cascade import Cascade
-from multi_target_tracker.detector import NEVER_EXEMPT, Detector, DetectorConfig, resolve_model
+from multi_target_tracker.detector import EVERY_GROUP, NEVER_EXEMPT, Detector, DetectorConfig, resolve_model
 
 SETUP = package_config_dir() / "uav_camera.yaml"
 # pooled over seeds 3900-3903 (every 8th frame) the set-up with its colour verifier measured detection 0.52 at
@@ -302,6 +302,32 @@ def test_the_verified_detections_exempt_the_confident_groups_from_containment(de
         assert np.array_equal(exempt, without)
         more += len(exempt) - len(never.detect(image))
     assert more > 0
+
+
+def test_the_patch_net_floor_rejects_only_groups_below_it_without_the_network(detector, held_out_frames):
+    """``patch_net_floor``: a group whose verifier log odds lie below it is never shown to the patch network (it keeps
+    the verifier's log odds and member-statistics box, so it is rejected); every other group gets what it gets without
+    the floor. -50 (the default) shows the network every group."""
+    cfg = dataclasses.replace(detector.config, low_confidence_band=0.0)
+    trees = Detector(dataclasses.replace(cfg, patch_net="", patch_net_floor=EVERY_GROUP))
+    every = Detector(dataclasses.replace(cfg, patch_net_floor=EVERY_GROUP))
+    floor = 0.0                                       # between the set-up's -5 and its threshold: many on each side
+    floored = Detector(dataclasses.replace(cfg, patch_net_floor=floor))
+    below = above = 0
+    for image, _ in held_out_frames[HELD_OUT[0]][:4]:
+        windows = every.raw(image)
+        (plain_boxes, plain), (all_boxes, summed), (boxes, logit) = (
+            d.candidates(image, windows, cfg.window_margin) for d in (trees, every, floored))
+        low = plain < floor
+        assert np.array_equal(logit[low], plain[low]) and np.array_equal(boxes[low], plain_boxes[low])
+        assert np.allclose(logit[~low], summed[~low], atol=1e-4) and np.allclose(boxes[~low], all_boxes[~low], atol=1e-3)
+        assert (logit[low] < cfg.verifier_threshold).all()
+        below, above = below + int(low.sum()), above + int((~low).sum())
+    assert below > 0 and above > 0
+    with pytest.raises(ConfigError, match="patch_net_floor"):
+        validate(dataclasses.replace(cfg, patch_net_floor=cfg.verifier_threshold + 0.5))
+    with pytest.raises(ConfigError, match="patch_net_floor"):
+        validate(DetectorConfig(patch_net_floor=-5.0))
 
 
 def test_low_confidence_band_needs_a_verifier():
