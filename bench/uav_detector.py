@@ -25,8 +25,9 @@
   minus false alarms, pooled) and applied unchanged to the evaluation seeds; also each one's AP and its
   detection at <= 0.15 / <= 0.30 false alarms on the evaluation seeds' PR curve.
 * **Speed**: frames/s of ``Detector.detect`` alone, one thread (``cv2.setNumThreads(1)``), 640x480,
-  side by side in this run: the set-up (its size range from the known altitude) against the same set-up without
-  its patch network (``BEFORE_PATCH_NET``, the set-up of sessions 39-42), with
+  side by side in this run: the set-up (its size range from the known altitude) against the set-up of sessions 45-47
+  (``BEFORE_SPEED``: pyramid step 1.2, groups of at least two windows, every group shown to the patch network), the
+  same set-up without its patch network (``BEFORE_PATCH_NET``, the set-up of sessions 39-42), with
   its windows grouped by their upright boxes (``UPRIGHT_GROUPS``, the set-up before session 39), without
   the colour blobs' views (``BEFORE_BLOBS``, the set-up before them), the same
   model scanning every window size that fits the frame, the same cascade without the colour verifier
@@ -66,7 +67,7 @@ from aircraft_docking_tracker.object_table import confident_rows  # noqa: E402
 from aircraft_docking_tracker.offline import build_processor  # noqa: E402
 from aircraft_docking_tracker.scenarios.uav import (  # noqa: E402
     UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_UPRIGHT as UPRIGHT,
-    UAV_BEFORE_PATCH_NET as BEFORE_PATCH_NET, UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
+    UAV_BEFORE_PATCH_NET as BEFORE_PATCH_NET, UAV_BEFORE_SPEED as BEFORE_SPEED, UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TUNING_SEEDS, UavScene,
     UavSceneConfig, detection_truth)
 from multi_target_tracker.detector import Detector, DetectorConfig, members_stats, suppress_contained  # noqa: E402
@@ -298,6 +299,7 @@ def main() -> int:
     rows = {"setup_results": det,
             # no altitude prior: every window size from the model's own window up to the frame
             "full_pyramid": variant(det, {"min_size": float(det.window[1]), "max_size": 1e4}),
+            "before_speed": variant(det, BEFORE_SPEED),
             "before_patch_net": variant(det, BEFORE_PATCH_NET),
             "upright_groups": variant(det, UPRIGHT_GROUPS),
             "before_blobs": variant(det, BEFORE_BLOBS),
@@ -398,6 +400,8 @@ def markdown(results: dict) -> str:
              line("same model, every window size (no altitude prior; every 4th frame)", full),
              *([line(f"same recipe, another training seed ({Path(results['other_seed_model']).name})",
                      results["other_seed_summary"])] if "other_seed_summary" in results else []),
+             *([line("pyramid step 1.2, groups of >= 2 windows, every group shown to the patch network (the set-up "
+                     "of sessions 45-47)", results["before_speed_summary"])] if "before_speed_summary" in results else []),
              *([line("without the patch network (the box regressor's image stages place the boxes, the tree verifier "
                      "alone at threshold 1.9: the set-up of sessions 39-42)",
                      results["before_patch_net_summary"])] if "before_patch_net_summary" in results else []),

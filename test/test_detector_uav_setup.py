@@ -17,7 +17,7 @@ from aircraft_docking_tracker.evaluation.detection_metrics import DetectionAccum
 from aircraft_docking_tracker.object_table import LOW_CONFIDENCE, confident_rows
 from aircraft_docking_tracker.offline import build_processor
 from aircraft_docking_tracker.scenarios.uav import (
-    UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_BEFORE_PATCH_NET as BEFORE_PATCH_NET, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_MEMBER_BOXES as MEMBER_BOXES,
+    UAV_BEFORE_BLOBS as BEFORE_BLOBS, UAV_BEFORE_PATCH_NET as BEFORE_PATCH_NET, UAV_BEFORE_SPEED as BEFORE_SPEED, UAV_CASCADE_ONLY as CASCADE_ONLY, UAV_LOGISTIC as LOGISTIC, UAV_MEMBER_BOXES as MEMBER_BOXES,
     UAV_UPRIGHT as UPRIGHT, UAV_UPRIGHT_GROUPS as UPRIGHT_GROUPS,
     UAV_VERIFIER_ONLY as VERIFIER_ONLY, UAV_EVAL_SEEDS, UAV_SETUP_GROUND_RESOLUTION, UAV_TRAIN_SEEDS,
     UAV_TUNING_SEEDS, UavScene, UavSceneConfig, detection_truth)
@@ -253,12 +253,16 @@ def test_the_patch_network_finds_more_vehicles_at_fewer_false_alarms_on_held_out
 def test_the_containment_exemption_finds_vehicles_that_overlap_on_held_out_scenes(detector, counts_of):
     """Side by side on the same held-out scenes: groups the verifier and network are sure of (log odds >= 7) kept beside
     a better detection they lie half inside (session 45), against containment for all, the same network. Measured on
-    these four scenes 164 of 192 vehicles in 183 detections (false alarms 0.104) against 149 in 161 (0.075); on
-    bench/uav_tracking.py's tuning seeds MOTA 0.773 against 0.755 (docs/uav_camera.md)."""
+    these four scenes with the scan of sessions 45-47 (``UAV_BEFORE_SPEED``) 164 of 192 vehicles in 183 detections
+    (false alarms 0.104) against 149 in 161 (0.075); on bench/uav_tracking.py's tuning seeds MOTA 0.773 against 0.755
+    (docs/uav_camera.md). With session 48's coarser scan and single-window groups the set-up finds 164 against 160 here
+    (tuning MOTA 0.786 against 0.777): the exemption still finds more, by less."""
     assert detector.config.containment_exempt_log_odds < NEVER_EXEMPT
-    without = Detector(dataclasses.replace(detector.config, containment_exempt_log_odds=NEVER_EXEMPT,
-                                           suppression_iou=1.0))
-    assert_side_by_side(counts_of, detector, without, gain=0.04, slack=0.06)
+    earlier = Detector(dataclasses.replace(detector.config, **BEFORE_SPEED))
+    for exempt in (earlier, detector):
+        without = Detector(dataclasses.replace(exempt.config, containment_exempt_log_odds=NEVER_EXEMPT,
+                                               suppression_iou=1.0))
+        assert_side_by_side(counts_of, exempt, without, gain=0.04 if exempt is earlier else 0.0, slack=0.06)
 
 
 def test_low_confidence_band_adds_flagged_groups_and_leaves_the_detections_unchanged(detector, held_out_frames):

@@ -47,10 +47,13 @@ UAV_EVAL_SEEDS = range(3000, 4000)
 
 # Earlier UAV camera set-ups, as overrides of config/uav_camera.yaml's detector: bench/uav_detector.py measures
 # them beside the set-up and test/test_detector_uav_setup.py checks that the set-up still beats each.
-# the set-up of sessions 39-42 (issue 12), before the patch network (session 43): the groups placed by the box
+# the set-up of sessions 45-47 (issue 12), before session 48's scan for speed: pyramid step 1.2, groups of at least two
+# windows, every group shown to the patch network; every earlier set-up below too
+UAV_BEFORE_SPEED = {"scale_factor": 1.2, "min_neighbors": 2, "patch_net_floor": -50.0}
+# the set-up of sessions 39-42, before the patch network (session 43): the groups placed by the box
 # regressor's image stages, the tree verifier's log odds alone against its threshold, every group half inside a
 # better one dropped (no containment exemption, session 45); every earlier set-up below too
-UAV_BEFORE_PATCH_NET = {"patch_net": "", "box_regressor": "uav_vehicles_box_regressor_image.json",
+UAV_BEFORE_PATCH_NET = {**UAV_BEFORE_SPEED, "patch_net": "", "box_regressor": "uav_vehicles_box_regressor_image.json",
                         "verifier_threshold": 1.9, "containment_exempt_log_odds": 50.0, "suppression_iou": 1.0}
 # the set-up before session 39: windows grouped by their upright boxes; every earlier set-up below too
 UAV_UPRIGHT_GROUPS = {**UAV_BEFORE_PATCH_NET, "group_shape": "upright"}
