@@ -238,7 +238,7 @@ class DetectorConfig:
             raise ConfigError("low_confidence_band needs a verifier (its log odds)", ("low_confidence_band", "verifier"))
         if self.patch_net_floor > EVERY_GROUP and not self.patch_net:
             raise ConfigError("patch_net_floor needs a patch network", ("patch_net_floor", "patch_net"))
-        if self.patch_net_floor > self.verifier_threshold - self.low_confidence_band:
+        if self.patch_net_floor > max(EVERY_GROUP, self.verifier_threshold - self.low_confidence_band):
             raise ConfigError(f"patch_net_floor {self.patch_net_floor} would reject groups the verifier alone accepts: "
                               f"at most verifier_threshold - low_confidence_band "
                               f"({self.verifier_threshold - self.low_confidence_band:g})",
@@ -920,15 +920,12 @@ class Detector:
         colour_box = refined if self.verifier.colour_box == "refined" else group_boxes
         logit = self.verifier.logit(features(bgr, colour_box, counts, margin_sums, best))
         if self.patch_net is not None and len(refined):
-            if self.config.patch_net_floor > EVERY_GROUP:      # the others keep the verifier's log odds: rejected
-                shown = np.flatnonzero(logit >= self.config.patch_net_floor)
-                patch_logit, boxes = self.patch_net.predict(bgr, refined[shown])
-                logit, refined = logit.copy(), refined.copy()
-                logit[shown] += patch_logit
-                refined[shown] = boxes
-            else:
-                patch_logit, refined = self.patch_net.predict(bgr, refined)
-                logit = logit + patch_logit
+            floor = self.config.patch_net_floor               # the groups below keep the verifier's log odds: rejected
+            shown = np.flatnonzero(logit >= floor) if floor > EVERY_GROUP else np.arange(len(logit))
+            patch_logit, boxes = self.patch_net.predict(bgr, refined[shown])
+            logit, refined = logit.copy(), refined.copy()
+            logit[shown] += patch_logit
+            refined[shown] = boxes
         return refined, logit, regression
 
     def _regressed(self, windows: Windows, frame_size: tuple[int, int], margin_floor: float):
