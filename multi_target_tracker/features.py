@@ -275,8 +275,8 @@ class LevelScan:
         if BLOCK % stride:
             raise FeatureError(f"stride {stride} must divide the block size {BLOCK}")
         feature_range(feature_set)
-        self.codes, self.plane_of = _kept_planes(None if codes is None else np.asarray(codes).tobytes(),
-                                                 None if codes is None else np.asarray(codes).dtype.str)
+        codes = None if codes is None else np.asarray(codes)
+        self.codes, self.plane_of = _kept_planes(*((None, None) if codes is None else (codes.tobytes(), codes.dtype.str)))
         wl, hl = level_size
         self.stride, self.feature_set = stride, feature_set
         self.level_size = (wl, hl)
