@@ -72,7 +72,7 @@ from aircraft_docking_tracker.object_table import DETECTION_DTYPE, FLAGGED_DETEC
 from multi_target_tracker import blob_views
 from multi_target_tracker.cascade import MAX_STUMPS, MIN_WINDOW, Cascade, CascadeError
 from multi_target_tracker.area_resize import resize_area
-from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan, window_grid
+from multi_target_tracker.features import LBP_SIZE, FeatureError, LevelScan, grid_origins, window_grid
 from multi_target_tracker.heading import turned_canvas
 from multi_target_tracker.box_regression import BoxRegressor, BoxRegressorError, member_features
 from multi_target_tracker.patch_net import PatchNet, PatchNetError
@@ -513,7 +513,7 @@ def scan_canvases(canvases: list[tuple[np.ndarray, float]], cascade: Cascade, st
     fx = shape[:, 1] / np.array([sizes[i][0] for i in used])
     fy = shape[:, 0] / np.array([sizes[i][1] for i in used])
     fx, fy = fx[which], fy[which]
-    boxes = _window_boxes(np.stack([c * stride + 1, r * stride + 1], axis=1).reshape(-1, 2), fx, fy)
+    boxes = _window_boxes(grid_origins(r, c, stride), fx, fy)
     ends = np.searchsorted(which, np.arange(1, len(used)))
     for i, b, sc in zip(used, np.split(boxes, ends), np.split(score, ends)):
         out[i] = (b, sc)

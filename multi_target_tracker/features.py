@@ -215,6 +215,12 @@ def window_grid(level_size: tuple[int, int], stride: int) -> tuple[int, int]:
     return max(0, (height - LBP_SIZE - 2) // stride + 1), max(0, (width - LBP_SIZE - 2) // stride + 1)
 
 
+def grid_origins(rows: np.ndarray, cols: np.ndarray, stride: int) -> np.ndarray:
+    """``(n, 2)`` top-left (x, y) in texture-level pixels of the windows at grid ``rows``, ``cols`` of a ``stride``
+    grid (:func:`window_grid`): code position ``(row, col) * stride``, pixel ``+1``."""
+    return np.stack([cols * stride + 1, rows * stride + 1], axis=1).reshape(-1, 2)
+
+
 @lru_cache(maxsize=16)
 def _kept_planes(codes: bytes | None, dtype: str | None) -> tuple[np.ndarray, np.ndarray]:
     """``(codes, plane_of)`` of the LBP codes whose block planes a scan keeps (their array's bytes and dtype; None:
@@ -297,8 +303,7 @@ class LevelScan:
         """``(n, 2)`` top-left (x, y) in texture-level pixels of the ``windows`` (flat indices; all of them, row-major,
         by default)."""
         flat = np.arange(self.n_windows) if windows is None else np.asarray(windows, np.int64)
-        r, c = np.divmod(flat, self.cols)
-        return np.stack([c * self.stride + 1, r * self.stride + 1], axis=1).reshape(-1, 2)
+        return grid_origins(*np.divmod(flat, self.cols), self.stride)
 
     # --- texture: block histograms swept down the level -> kept code planes, per-window maximum (eq. 3)
     def _texture(self, gray_l: np.ndarray) -> None:
