@@ -93,14 +93,16 @@ def train_models(out_dir: Path, quick: bool) -> dict:
 
 #: the drone-view set-up's scan where config/detector.yaml sets it beyond the dataclass defaults: the colour blobs'
 #: views (issue 12, session 34). Every drone-view figure below scans as the node does; the tiles are read in colour.
-SETUP_SCAN = {key: value for key, value in load_yaml_parameters(package_config_dir() / "detector.yaml",
-                                                                "detector").items() if key.startswith("blob_")}
+_SETUP = load_yaml_parameters(package_config_dir() / "detector.yaml", "detector")
+SETUP_SCAN = {key: value for key, value in _SETUP.items() if key.startswith("blob_")}
+#: the drone-view node's grouping (config/detector.yaml; session 49: chosen over three training seeds, node_grouping)
+SETUP_GROUPING = {key: _SETUP[key] for key in ("min_neighbors", "window_margin")}
 
 
 def detector_for(model: Path, **overrides) -> Detector:
-    """Node defaults (the window-size range the model was trained for, config/detector.yaml's scan), with
-    ``overrides``."""
-    return Detector(DetectorConfig(model=str(model), **{**SETUP_SCAN, **overrides}))
+    """Node defaults (the window-size range the model was trained for, config/detector.yaml's scan and grouping),
+    with ``overrides``."""
+    return Detector(DetectorConfig(model=str(model), **{**SETUP_SCAN, **SETUP_GROUPING, **overrides}))
 
 
 def evaluate(det: Detector, items) -> tuple[dict, dict]:
@@ -181,6 +183,7 @@ GRID_MARGIN = (-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
 # (the trained cascade, OpenCV's 3 neighbours). The node defaults now are the choice over all four folds,
 # so their held-out estimate is the inner-choice column (each fold's choice made without it).
 REFERENCE_GROUPING = {"min_neighbors": 3, "window_margin": 0.0}
+TARGET_DETECTION = 0.90
 TARGET_FALSE_ALARMS = 0.10
 CHOICE_FALSE_ALARMS = 0.08   # the inner choice keeps a margin below the target
 # how the inner choice weighs the inner folds (choose_grouping); the other rule is reported beside it
@@ -322,7 +325,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
                 summary_rules[rule] = {
                     "mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
                     "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
-                    "folds_meeting_target": int(sum(d >= 0.90 and f <= TARGET_FALSE_ALARMS for d, f in zip(det, far))),
+                    "folds_meeting_target": int(sum(d >= TARGET_DETECTION and f <= TARGET_FALSE_ALARMS for d, f in zip(det, far))),
                     "all_folds_choice": choose_grouping(defaults, fold_raws, rule)}
         pooled = DetectionAccumulator()
         for raws in fold_raws:
@@ -341,7 +344,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
                 far = [f[key]["false_alarm_rate"] for f in folds]
                 summary[key] = {"mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
                                 "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
-                                "folds_meeting_target": int(sum(d >= 0.90 and f <= TARGET_FALSE_ALARMS
+                                "folds_meeting_target": int(sum(d >= TARGET_DETECTION and f <= TARGET_FALSE_ALARMS
                                                                 for d, f in zip(det, far)))}
         # the setting for a model trained on every prefix: chosen on all folds' held-out windows
         summary["all_folds_choice"] = choose_grouping(defaults, fold_raws)
@@ -457,7 +460,7 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
         print(f"[box regression seed {seed}] fold {k}: {len(raws)} tiles", flush=True)
     groups = member_groups(raws_by_fold, sizes_by_fold)
     folds = []
-    node = (defaults.min_neighbors, defaults.window_margin)
+    node = (SETUP_GROUPING["min_neighbors"], SETUP_GROUPING["window_margin"])
     for k, held in enumerate(FOLDS):
         inner = [j for j in range(len(FOLDS)) if j != k]
         regressor = fit_box_regressor(*regression_samples([groups[j] for j in inner]), BOX_REGRESSION_L2)
@@ -480,6 +483,9 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
                                                                  chosen["window_margin"])),
                            "at_node_defaults": _rates(regressed_summary(defaults, groups[k], reg, *node))}
             print(f"[box regression seed {seed}] fold {k} {name}: {entry[name]}", flush=True)
+        # every grid setting, for the choice of the node's grouping over all training seeds (node_grouping)
+        entry["grid"] = grid_rates(defaults, groups[k], regressor)
+        entry["inner_grids"] = {str(j): grid_rates(defaults, groups[j], r) for j, r in zip(inner, inner_regs)}
         plain = entry["mean box"]["chosen"]     # the regressor as a last step only: the mean box's grouping kept
         entry["regressed, mean-box grouping"] = {"chosen": plain, "at_choice": _rates(regressed_summary(
             defaults, groups[k], regressor, plain["min_neighbors"], plain["window_margin"]))}
@@ -497,7 +503,7 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
             out.setdefault("summary", {}).setdefault(name, {})[point] = {
                 "mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
                 "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
-                "folds_meeting_target": int(sum(d >= 0.90 and f <= TARGET_FALSE_ALARMS for d, f in zip(det, far)))}
+                "folds_meeting_target": int(sum(d >= TARGET_DETECTION and f <= TARGET_FALSE_ALARMS for d, f in zip(det, far)))}
     regressor = fit_box_regressor(*regression_samples(groups), BOX_REGRESSION_L2)
     regressor.info.update({"fold_models": models, "recipe": recipe_name, "training_seed": seed,
                            "samples_from": "held-out groups of the prefix-fold models (bench/detector.py "
@@ -505,6 +511,84 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
                            "min_windows": BOX_REGRESSION_MIN_WINDOWS, "window_margins": list(GRID_MARGIN),
                            "group_iou": defaults.group_iou})
     return out, regressor
+
+
+def grid_rates(config: DetectorConfig, fold_groups: list, regressor) -> dict:
+    """``{"min_neighbors/window_margin": [detection, false alarms]}`` of one fold's groups refined by ``regressor``,
+    at every setting of the grid."""
+    rates = {}
+    for mn in GRID_MIN_NEIGHBORS:
+        for m in GRID_MARGIN:
+            s = regressed_summary(config, fold_groups, regressor, mn, m)
+            rates[grid_key(mn, m)] = [round(s["detection_rate"], 4), round(s["false_alarm_rate"], 4)]
+    return rates
+
+
+def grid_key(min_neighbors: int, margin: float) -> str:
+    return f"{min_neighbors}/{margin:+.1f}"
+
+
+def target_margin(detection: float, false_alarms: float) -> float:
+    """How far a fold lies inside issue 12's target, on its nearer side: ``min(det - 0.90, 0.10 - FA)`` (< 0: missed)."""
+    return min(detection - TARGET_DETECTION, TARGET_FALSE_ALARMS - false_alarms)
+
+
+def choose_by_margin(grids: list) -> str:
+    """The grid setting whose smallest :func:`target_margin` over ``grids`` (one per fold and training seed) is the
+    largest; ties: the higher mean detection. Both sides of the target count alike: videos we do not have lose
+    ground on either."""
+    def key(setting):
+        rates = [g[setting] for g in grids]
+        return min(target_margin(d, f) for d, f in rates), float(np.mean([d for d, _ in rates]))
+    return max(grids[0], key=key)
+
+
+def choose_by_worst_fold(grids: list) -> str:
+    """:func:`choose_grouping`'s ``worst-fold`` rule on stored grids: the highest worst detection with every grid at
+    <= CHOICE_FALSE_ALARMS false alarms (else the fewest worst false alarms)."""
+    def key(setting):
+        det = min(g[setting][0] for g in grids)
+        far = max(g[setting][1] for g in grids)
+        return (True, det, -far) if far <= CHOICE_FALSE_ALARMS else (False, -far, det)
+    return max(grids[0], key=key)
+
+
+PREVIOUS_GROUPING = (3, -0.5)   # the node's min_neighbors / window_margin from session 6 to 48 (rule worst-fold, seed 0)
+NODE_GROUPING_RULES = {"margin": choose_by_margin, "worst-fold": choose_by_worst_fold}
+
+
+def node_grouping(runs: dict, recipe_name: str = SHIPPED_RECIPE) -> dict | None:
+    """The drone-view node's grouping (min_neighbors, window_margin) chosen over every training seed's fold models
+    (``kfold_box_regression``'s grids, each fold refined by its own regressor), and the protocol's estimate of that
+    choice on videos it did not see: fold k scored at the setting each rule picks on the *other* folds of every seed
+    (their grids refined by regressors trained without fold k). None before a run stored grids."""
+    runs = [r for key, r in sorted(runs.items()) if key.startswith(f"{recipe_name}_seed")
+            and all("grid" in f for f in r.get("folds", ()))]
+    if not runs:
+        return None
+
+    def summary(cells):
+        det, far = [c[0] for c in cells], [c[1] for c in cells]
+        return {"mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
+                "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
+                "smallest_target_margin": float(min(target_margin(d, f) for d, f in cells)),
+                "cells_meeting_target": int(sum(target_margin(d, f) >= 0 for d, f in cells)), "cells": len(cells)}
+    out = {"seeds": [r["seed"] for r in runs], "rules": {}}
+    every = [f["grid"] for r in runs for f in r["folds"]]
+    out["shown"] = {label: {"setting": grid_key(*setting), **summary([g[grid_key(*setting)] for g in every])}
+                    for label, setting in (("node defaults of sessions 6-48", PREVIOUS_GROUPING),
+                                           ("node defaults (config/detector.yaml)", runs[0]["node_defaults"]))}
+    for name, rule in NODE_GROUPING_RULES.items():
+        chosen = rule(every)
+        held_out = []
+        for k in range(len(FOLDS)):
+            inner = [g for r in runs for g in r["folds"][k]["inner_grids"].values()]
+            setting = rule(inner)
+            held_out += [{"seed": r["seed"], "fold": k, "setting": setting, "rates": r["folds"][k]["grid"][setting]}
+                         for r in runs]
+        out["rules"][name] = {"all_folds": {"setting": chosen, **summary([g[chosen] for g in every])},
+                              "held_out": {"folds": held_out, **summary([h["rates"] for h in held_out])}}
+    return out
 
 
 def fold_regressor_path(work: Path, recipe_name: str, feature_set: str, fold: int, seed) -> Path:
@@ -603,6 +687,9 @@ def main() -> int:
                         help="measure nothing: put this k-fold result into bench/results/detector.json and rewrite "
                         "the tables and plots")
     parser.add_argument("--recipe", default=SHIPPED_RECIPE, choices=sorted(RECIPES), help="training recipe of the folds")
+    parser.add_argument("--table1", nargs="+", default=None, metavar="JSON",
+                        help="measure nothing: put these --compare runs (kfold_<recipe>_seed<S>.json in their --work; "
+                        "runs of one seed with other feature sets are merged; scanned as config/detector.yaml scans) into Table 1 by training seed")
     parser.add_argument("--compare", action="store_true",
                         help="measure nothing else: run the k-fold protocol for --recipe (fused features, inner choice "
                         "by crossfit) and put it into the recipe comparison of bench/results/detector.json")
@@ -663,6 +750,11 @@ def main() -> int:
     if args.synthetic_only:
         results = json.loads(RESULTS.read_text())
         synthetic(results, args.quick)
+        write_results(results)
+        return 0
+    if args.table1:
+        results = json.loads(RESULTS.read_text())
+        results["table1_by_seed"] = table1_by_seed([json.loads(Path(p).read_text()) for p in args.table1])
         write_results(results)
         return 0
     if args.update_folds:
@@ -795,6 +887,58 @@ def add_to_comparison(kfold_results: dict, kf: dict) -> None:
                   if (r["recipe"], r.get("border_margin", 1.0), r.get("choice_rule", "pooled"))
                   != (kf["recipe"], row["border_margin"], row["choice_rule"])]
     kfold_results["recipe_comparison"] = comparison + [row]
+
+
+def table1_by_seed(runs: list) -> dict:
+    """Seed 003's Table 1 from ``kfold`` runs of one recipe at several training seeds: per seed and feature set the
+    pooled AP, the oracle detection at <= 10 % false alarms and each inner-choice rule's mean / worst."""
+    recipes = {r["recipe"] for r in runs}
+    if len(recipes) != 1:
+        raise SystemExit(f"--table1 takes runs of one recipe, got {sorted(recipes)}")
+    seeds = {}
+    for r in runs:
+        seeds.setdefault(str(r["seed"]), {}).update({fs: {"pooled_average_precision": e["pooled_average_precision"],
+                                      "pooled_best_at_10pct_false_alarms": e["pooled_best_at_10pct_false_alarms"],
+                                      "rules": {rule: {k: v for k, v in m.items() if k != "all_folds_choice"}
+                                                for rule, m in e["rules"].items()}}
+                                 for fs, e in r["feature_sets"].items()})
+    return {"recipe": recipes.pop(), "scan": SETUP_SCAN, "train_args": runs[0]["train_args"], "seeds": seeds}
+
+
+def table1_markdown(t1: dict) -> list[str]:
+    """``table1_by_seed`` as a table, and how often fused is at least as good as each other feature set."""
+    rows = ["### Seed 003 Table 1 with the drone-view set-up's scan, by training seed (issue 12, session 49)", "",
+            f"The prefix folds above, each feature set trained by recipe `{t1['recipe']}` at each training seed, every "
+            f"model scanned as config/detector.yaml scans (the colour blobs' views, {t1['scan']}; mean boxes, no "
+            "regressor, for every feature set). *Oracle*: the best detection at <= 10 % false alarms on the pooled "
+            "held-out PR curve, i.e. detection at equal false alarms. *Inner choice*: rule `worst-fold`, each fold's "
+            "grouping chosen without it. Border-cut boxes ignored.", "",
+            "| training seed | features | pooled AP | oracle det. at <= 10 % FA | inner choice mean det. / FA | "
+            "inner choice worst det. / FA | folds meeting 0.90 / 0.10 |", "|---|---|---|---|---|---|---|"]
+    for seed, sets in sorted(t1["seeds"].items()):
+        for fs in FEATURE_SETS:
+            if fs not in sets:
+                continue
+            e, c = sets[fs], sets[fs]["rules"]["worst-fold"]
+            rows.append(f"| {seed} | {fs} | {e['pooled_average_precision']:.3f} | "
+                        f"{e['pooled_best_at_10pct_false_alarms']['detection_rate']:.3f} | "
+                        f"{c['mean_detection_rate']:.3f} / {c['mean_false_alarm_rate']:.3f} | "
+                        f"{c['worst_detection_rate']:.3f} / {c['worst_false_alarm_rate']:.3f} | "
+                        f"{c['folds_meeting_target']} of 4 |")
+    for other in FEATURE_SETS:
+        pairs = [(sets["fused"], sets[other]) for sets in t1["seeds"].values() if other != "fused"
+                 and "fused" in sets and other in sets]
+        if pairs:
+            oracle = sum(f["pooled_best_at_10pct_false_alarms"]["detection_rate"]
+                         >= o["pooled_best_at_10pct_false_alarms"]["detection_rate"] for f, o in pairs)
+            ap = sum(f["pooled_average_precision"] >= o["pooled_average_precision"] for f, o in pairs)
+            inner = [(f["rules"]["worst-fold"], o["rules"]["worst-fold"]) for f, o in pairs]
+            both = sum(f["mean_detection_rate"] >= o["mean_detection_rate"]
+                       and f["mean_false_alarm_rate"] <= o["mean_false_alarm_rate"] for f, o in inner)
+            rows += ["", f"Fused against {other}-only: detection at <= 10 % false alarms at least as high at {oracle} "
+                     f"of {len(pairs)} training seeds, pooled AP at {ap} of {len(pairs)}; at the inner choice, at least "
+                     f"as much detection at no more false alarms (means over the folds) at {both} of {len(pairs)}."]
+    return rows + [""]
 
 
 def write_results(results: dict) -> None:
@@ -975,12 +1119,45 @@ def box_regression_markdown(runs: dict) -> list[str]:
     return rows + [""]
 
 
+def node_grouping_markdown(choice: dict) -> list[str]:
+    """``node_grouping``'s choice of the drone-view node's grouping over the training seeds, and its held-out estimate."""
+    def cells(m):
+        return (f"{m['mean_detection_rate']:.3f} / {m['mean_false_alarm_rate']:.3f} | **{m['worst_detection_rate']:.3f} "
+                f"/ {m['worst_false_alarm_rate']:.3f}** | {m['smallest_target_margin']:+.3f} | "
+                f"{m['cells_meeting_target']} of {m['cells']}")
+    seeds = ", ".join(str(s) for s in choice["seeds"])
+    rows = ["### The drone-view node's grouping over training seeds (issue 12, session 49)", "",
+            f"The fold models of the shipped recipe at training seeds {seeds} (the table above: each fold refined by "
+            "its own regressor, trained without it). Every grid setting (min_neighbors x window_margin) is scored on "
+            "every fold of every seed. Rule `margin`: the setting whose smallest margin to the target, min(det - 0.90, "
+            "0.10 - FA), over all those folds is the largest (ties: higher mean detection); rule `worst-fold`: the "
+            "inner choice's rule (the highest worst detection at <= 8 % false alarms everywhere). *All folds*: the "
+            "setting a rule picks on every fold of every seed (the node's choice; not a held-out figure). *Held out*: "
+            "fold k at the setting the rule picks on the other three folds of every seed (their regressors trained "
+            "without fold k): the protocol's estimate for videos the choice did not see. Detection / false alarms, "
+            "border-cut boxes ignored.", "",
+            "| grouping | setting (min_neighbors / margin) | mean | worst | smallest margin | folds x seeds meeting "
+            "0.90 / 0.10 |", "|---|---|---|---|---|---|"]
+    for label, shown in choice["shown"].items():
+        rows.append(f"| {label} | {shown['setting']} | {cells(shown)} |")
+    for name, rule in choice["rules"].items():
+        rows.append(f"| rule `{name}`, all folds | {rule['all_folds']['setting']} | {cells(rule['all_folds'])} |")
+        settings = sorted({h["setting"] for h in rule["held_out"]["folds"]})
+        rows.append(f"| rule `{name}`, held out | {', '.join(settings)} | {cells(rule['held_out'])} |")
+    return rows + [""]
+
+
 def markdown(results: dict, quick: bool) -> str:
     rows = ["## Detector (issue 5)", ""]
     if results.get("kfold"):
         rows += kfold_markdown(results["kfold"])
+    if results.get("table1_by_seed"):
+        rows += table1_markdown(results["table1_by_seed"])
     if results.get("box_regression"):
         rows += box_regression_markdown(results["box_regression"])
+        choice = node_grouping(results["box_regression"])
+        if choice:
+            rows += node_grouping_markdown(choice)
     rows += ["### Shipped models: accuracy on prefixes 1_ and 4_ (the former split), speed", "",
             f"Validation: drone-view tiles with prefixes {', '.join(results['validation_prefixes'])} "
             f"({'every 8th' if quick else 'every 3rd'} tile: {results['validation_tiles']} tiles); a model trained on them too "
