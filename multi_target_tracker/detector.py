@@ -161,8 +161,8 @@ class DetectorConfig:
                              "turned (the window's own rectangle as its view turned it: two vehicles side by side at "
                              "45 degrees overlap far less than their upright boxes do)", choices=("upright", "turned"))
     min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
-                               "detection score is this count plus a fraction (default chosen by k-fold by video "
-                               "for the shipped drone-view model)", low=1, high=100)
+                               "detection score is this count plus a fraction (the drone-view set-up's, config/detector.yaml, is "
+                               "chosen by k-fold by video over three training seeds)", low=1, high=100)
     containment: float = param(0.4, "drop a group lying this much inside a better one (intersection over the "
                                "smaller box; 1: never)", low=0.0, high=1.0)
     suppression_iou: float = param(1.0, "also drop a group overlapping a better one by this IoU (non-maximum "
@@ -173,8 +173,8 @@ class DetectorConfig:
                                                "better one, is taken as a vehicle beside it (vehicles that overlap "
                                                "in the image); needs the verifier; 50: never", low=-50.0, high=NEVER_EXEMPT)
     window_margin: float = param(-0.5, "minimum last-stage margin of a window (0: the trained cascade; <0 more "
-                                 "windows, >0 fewer; default chosen by k-fold by video for the shipped drone-view "
-                                 "model)", low=-100.0, high=100.0)
+                                 "windows, >0 fewer; the drone-view set-up's, config/detector.yaml, is chosen with "
+                                 "min_neighbors)", low=-100.0, high=100.0)
     box_scale: float = param(1.0, "each detection box is scaled about its centre by this factor (a cascade fires "
                              "most on windows a little inside the object; 1: the grouped windows as they are; the "
                              "UAV set-up's is chosen on tuning scenes)", low=0.25, high=4.0)

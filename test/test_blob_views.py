@@ -183,7 +183,8 @@ def _turned_tiles(angle: float, every: int = 25, count: int = 8):
 def test_the_drone_view_setup_finds_vehicles_at_a_diagonal_heading(angle):
     """config/detector.yaml's blob views on real drone-view tiles turned so that their vehicles lie at a diagonal,
     a heading the upright scan's 64x32 windows (both orientations) overlap poorly: the set-up without the blob views
-    finds 4 of 34 at 30 degrees and none at 45; with them 31 and 26 (session 34). The tiles were in the model's
+    finds 4 of 34 at 30 degrees and none at 45; with them 31 and 26 (session 34; 30 and 24 at session 49's grouping,
+    with fewer false alarms). The tiles were in the model's
     training, upright only (the held-out figures are bench/detector.py's prefix folds)."""
     params = load_yaml_parameters(package_config_dir() / "detector.yaml", "detector")
     config = DetectorConfig(**{k: v for k, v in params.items() if "." not in k})

@@ -57,6 +57,8 @@ def test_yaml_lists_every_parameter_with_its_default():
     expected["box_regressor"] = "drone_vehicles_box_regressor.json"
     # ... and its scan: the colour blobs' views, framed as the drone-view model's boxes, looked for at a quarter size
     expected.update({"blob_views": True, "blob_context": 1.0, "blob_scale": 0.25})
+    # ... and its grouping, chosen over the prefix folds of three training seeds (bench/detector.py node_grouping)
+    expected.update({"min_neighbors": 5, "window_margin": -1.0})
     assert params == expected
 
 
