@@ -114,16 +114,19 @@ UAV_MODEL = "uav_vehicles_fused.json"
 def detector_parameters() -> dict:
     """The UAV cascade for the bench's scene height (``UAV_MODEL``) if shipped, else the
     configured default, else an OpenCV Haar cascade shipped with cv2 (the bench still measures the pipeline).
-    config/detector.yaml's box regressor belongs to the drone-view model: dropped with any other model."""
-    for model in (UAV_MODEL, DetectorConfig().model):
+    config/detector.yaml's box regressor and grouping belong to the drone-view model: with any other model, no
+    regressor and the dataclass's grouping."""
+    defaults = DetectorConfig()
+    other_model = {"box_regressor": "", "min_neighbors": defaults.min_neighbors, "window_margin": defaults.window_margin}
+    for model in (UAV_MODEL, defaults.model):
         try:
             resolve_model(model)
-            return {"model": model} if model == DetectorConfig().model else {"model": model, "box_regressor": ""}
+            return {"model": model} if model == defaults.model else {"model": model, **other_model}
         except DetectorError:
             continue
     import cv2  # noqa: PLC0415
 
-    return {"backend": "opencv", "box_regressor": "",
+    return {"backend": "opencv", **other_model,
             "model": str(Path(cv2.data.haarcascades) / "haarcascade_frontalface_default.xml")}
 
 
