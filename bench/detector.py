@@ -793,8 +793,9 @@ def main() -> int:
             results["kfold"] = kfold(("fused",) if args.quick else FEATURE_SETS, args.recipe, Path(work),
                                      "none" if args.quick else "crossfit",
                                      quick=args.quick)
-    if last_results and "box_regression" in last_results:        # only --box-regression runs remake it
-        results["box_regression"] = last_results["box_regression"]
+    for key in ("box_regression", "table1_by_seed"):                # only --box-regression / --table1 remake them
+        if last_results and key in last_results:
+            results[key] = last_results[key]
     for fs in () if args.folds_only else FEATURE_SETS:
         model = models_dir / model_name(fs)
         if not model.is_file():
