@@ -688,8 +688,9 @@ def main() -> int:
                         "the tables and plots")
     parser.add_argument("--recipe", default=SHIPPED_RECIPE, choices=sorted(RECIPES), help="training recipe of the folds")
     parser.add_argument("--table1", nargs="+", default=None, metavar="JSON",
-                        help="measure nothing: put these --compare runs (kfold_<recipe>_seed<S>.json in their --work; "
-                        "runs of one seed with other feature sets are merged; scanned as config/detector.yaml scans) into Table 1 by training seed")
+                        help="measure nothing: put these --compare runs (kfold_<recipe>_seed<S>.json in their --work, "
+                        "scanned as config/detector.yaml scans; runs of one seed with other feature sets are merged) "
+                        "into Table 1 by training seed")
     parser.add_argument("--compare", action="store_true",
                         help="measure nothing else: run the k-fold protocol for --recipe (fused features, inner choice "
                         "by crossfit) and put it into the recipe comparison of bench/results/detector.json")
@@ -898,11 +899,11 @@ def table1_by_seed(runs: list) -> dict:
         raise SystemExit(f"--table1 takes runs of one recipe, got {sorted(recipes)}")
     seeds = {}
     for r in runs:
-        seeds.setdefault(str(r["seed"]), {}).update({fs: {"pooled_average_precision": e["pooled_average_precision"],
-                                      "pooled_best_at_10pct_false_alarms": e["pooled_best_at_10pct_false_alarms"],
-                                      "rules": {rule: {k: v for k, v in m.items() if k != "all_folds_choice"}
-                                                for rule, m in e["rules"].items()}}
-                                 for fs, e in r["feature_sets"].items()})
+        for fs, e in r["feature_sets"].items():
+            seeds.setdefault(str(r["seed"]), {})[fs] = {
+                "pooled_average_precision": e["pooled_average_precision"],
+                "pooled_best_at_10pct_false_alarms": e["pooled_best_at_10pct_false_alarms"],
+                "rules": {rule: {k: v for k, v in m.items() if k != "all_folds_choice"} for rule, m in e["rules"].items()}}
     return {"recipe": recipes.pop(), "scan": SETUP_SCAN, "train_args": runs[0]["train_args"], "seeds": seeds}
 
 
@@ -925,7 +926,7 @@ def table1_markdown(t1: dict) -> list[str]:
                         f"{e['pooled_best_at_10pct_false_alarms']['detection_rate']:.3f} | "
                         f"{c['mean_detection_rate']:.3f} / {c['mean_false_alarm_rate']:.3f} | "
                         f"{c['worst_detection_rate']:.3f} / {c['worst_false_alarm_rate']:.3f} | "
-                        f"{c['folds_meeting_target']} of 4 |")
+                        f"{c['folds_meeting_target']} of {len(FOLDS)} |")
     for other in FEATURE_SETS:
         pairs = [(sets["fused"], sets[other]) for sets in t1["seeds"].values() if other != "fused"
                  and "fused" in sets and other in sets]
