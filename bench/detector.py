@@ -322,11 +322,8 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
             for rule in CHOICE_RULES:
                 det = [f["rules"][rule]["at_choice"]["detection_rate"] for f in folds]
                 far = [f["rules"][rule]["at_choice"]["false_alarm_rate"] for f in folds]
-                summary_rules[rule] = {
-                    "mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
-                    "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
-                    "folds_meeting_target": int(sum(d >= TARGET_DETECTION and f <= TARGET_FALSE_ALARMS for d, f in zip(det, far))),
-                    "all_folds_choice": choose_grouping(defaults, fold_raws, rule)}
+                summary_rules[rule] = {**fold_summary(det, far),
+                                       "all_folds_choice": choose_grouping(defaults, fold_raws, rule)}
         pooled = DetectionAccumulator()
         for raws in fold_raws:
             for boxes, scores, gt, cut in raws:
@@ -342,10 +339,7 @@ def kfold(feature_sets, recipe_name: str, work: Path, inner: str = "crossfit", s
             if key in folds[0]:
                 det = [f[key]["detection_rate"] for f in folds]
                 far = [f[key]["false_alarm_rate"] for f in folds]
-                summary[key] = {"mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
-                                "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
-                                "folds_meeting_target": int(sum(d >= TARGET_DETECTION and f <= TARGET_FALSE_ALARMS
-                                                                for d, f in zip(det, far)))}
+                summary[key] = fold_summary(det, far)
         # the setting for a model trained on every prefix: chosen on all folds' held-out windows
         summary["all_folds_choice"] = choose_grouping(defaults, fold_raws)
         summary["pooled_average_precision"] = pooled["average_precision"]
@@ -500,10 +494,7 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
                 ("at_choice", "at_node_defaults")[:1 if name.endswith("grouping") else 2]:
             det = [f[name][point]["detection_rate"] for f in folds]
             far = [f[name][point]["false_alarm_rate"] for f in folds]
-            out.setdefault("summary", {}).setdefault(name, {})[point] = {
-                "mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
-                "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
-                "folds_meeting_target": int(sum(d >= TARGET_DETECTION and f <= TARGET_FALSE_ALARMS for d, f in zip(det, far)))}
+            out.setdefault("summary", {}).setdefault(name, {})[point] = fold_summary(det, far)
     regressor = fit_box_regressor(*regression_samples(groups), BOX_REGRESSION_L2)
     regressor.info.update({"fold_models": models, "recipe": recipe_name, "training_seed": seed,
                            "samples_from": "held-out groups of the prefix-fold models (bench/detector.py "
@@ -526,6 +517,13 @@ def grid_rates(config: DetectorConfig, fold_groups: list, regressor) -> dict:
 
 def grid_key(min_neighbors: int, margin: float) -> str:
     return f"{min_neighbors}/{margin:+.1f}"
+
+
+def fold_summary(det: list, far: list) -> dict:
+    """Mean and worst detection / false alarms of folds, and how many of them meet issue 12's target."""
+    return {"mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
+            "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
+            "folds_meeting_target": int(sum(target_margin(d, f) >= 0 for d, f in zip(det, far)))}
 
 
 def target_margin(detection: float, false_alarms: float) -> float:
@@ -568,11 +566,8 @@ def node_grouping(runs: dict, recipe_name: str = SHIPPED_RECIPE) -> dict | None:
         return None
 
     def summary(cells):
-        det, far = [c[0] for c in cells], [c[1] for c in cells]
-        return {"mean_detection_rate": float(np.mean(det)), "mean_false_alarm_rate": float(np.mean(far)),
-                "worst_detection_rate": float(np.min(det)), "worst_false_alarm_rate": float(np.max(far)),
-                "smallest_target_margin": float(min(target_margin(d, f) for d, f in cells)),
-                "cells_meeting_target": int(sum(target_margin(d, f) >= 0 for d, f in cells)), "cells": len(cells)}
+        return {**fold_summary([c[0] for c in cells], [c[1] for c in cells]), "cells": len(cells),
+                "smallest_target_margin": float(min(target_margin(d, f) for d, f in cells))}
     out = {"seeds": [r["seed"] for r in runs], "rules": {}}
     every = [f["grid"] for r in runs for f in r["folds"]]
     out["shown"] = {label: {"setting": grid_key(*setting), **summary([g[grid_key(*setting)] for g in every])}
@@ -1126,7 +1121,7 @@ def node_grouping_markdown(choice: dict) -> list[str]:
     def cells(m):
         return (f"{m['mean_detection_rate']:.3f} / {m['mean_false_alarm_rate']:.3f} | **{m['worst_detection_rate']:.3f} "
                 f"/ {m['worst_false_alarm_rate']:.3f}** | {m['smallest_target_margin']:+.3f} | "
-                f"{m['cells_meeting_target']} of {m['cells']}")
+                f"{m['folds_meeting_target']} of {m['cells']}")
     seeds = ", ".join(str(s) for s in choice["seeds"])
     rows = ["### The drone-view node's grouping over training seeds (issue 12, session 49)", "",
             f"The fold models of the shipped recipe at training seeds {seeds} (the table above: each fold refined by "

@@ -57,10 +57,10 @@ def test_held_out_choice_reads_only_the_other_folds(monkeypatch):
     held = {(h["seed"], h["fold"]): h for h in margin["held_out"]["folds"]}
     assert held[0, 0]["setting"] == EAGER and held[0, 0]["rates"] == [0.97, 0.15]
     assert held[1, 1]["setting"] == CAREFUL and held[1, 1]["rates"] == [0.93, 0.00]
-    assert margin["held_out"]["cells_meeting_target"] == 2 and margin["held_out"]["cells"] == 4
+    assert margin["held_out"]["folds_meeting_target"] == 2 and margin["held_out"]["cells"] == 4
     assert margin["held_out"]["worst_false_alarm_rate"] == pytest.approx(0.15)
     shown = choice["shown"]["node defaults of sessions 6-48"]
-    assert shown["setting"] == EAGER and shown["cells_meeting_target"] == 2
+    assert shown["setting"] == EAGER and shown["folds_meeting_target"] == 2
 
 
 def test_runs_without_grids_give_no_choice():
