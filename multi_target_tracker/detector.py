@@ -161,8 +161,9 @@ class DetectorConfig:
                              "turned (the window's own rectangle as its view turned it: two vehicles side by side at "
                              "45 degrees overlap far less than their upright boxes do)", choices=("upright", "turned"))
     min_neighbors: int = param(3, "windows a group needs to be a detection (OpenCV's minNeighbors); the "
-                               "detection score is this count plus a fraction (the drone-view set-up's, config/detector.yaml, is "
-                               "chosen by k-fold by video over three training seeds)", low=1, high=100)
+                               "detection score is this count plus a fraction (the drone-view set-up's, "
+                               "config/detector.yaml, is chosen by k-fold by video over three training seeds)",
+                               low=1, high=100)
     containment: float = param(0.4, "drop a group lying this much inside a better one (intersection over the "
                                "smaller box; 1: never)", low=0.0, high=1.0)
     suppression_iou: float = param(1.0, "also drop a group overlapping a better one by this IoU (non-maximum "
