@@ -229,6 +229,14 @@ def grouped_summary(config: DetectorConfig, raws, min_neighbors: int, margin: fl
     return acc.summary()
 
 
+def worst_fold_key(worst_detection: float, worst_false_alarms: float) -> tuple:
+    """Rule ``worst-fold``'s order of settings: those with every fold at <= CHOICE_FALSE_ALARMS first, by their worst
+    detection, then fewer false alarms; the others by their worst false alarms, then detection."""
+    if worst_false_alarms <= CHOICE_FALSE_ALARMS:
+        return True, worst_detection, -worst_false_alarms
+    return False, -worst_false_alarms, worst_detection
+
+
 def choose_grouping(config: DetectorConfig, raws_by_fold: list, rule: str = None) -> dict:
     """(min_neighbors, window_margin) chosen on inner validation tiles, given per fold (per video group).
 
@@ -252,7 +260,7 @@ def choose_grouping(config: DetectorConfig, raws_by_fold: list, rule: str = None
             if rule == "pooled":
                 key = (far <= CHOICE_FALSE_ALARMS, det if far <= CHOICE_FALSE_ALARMS else -far)
             else:
-                key = (True, det, -far) if far <= CHOICE_FALSE_ALARMS else (False, -far, det)
+                key = worst_fold_key(det, far)
             if best is None or key > best[0] or (rule != "pooled" and key == best[0]):
                 best = (key, {"min_neighbors": mn, "window_margin": m, "rule": rule,
                               "inner_detection_rate": det, "inner_false_alarm_rate": far})
@@ -417,7 +425,7 @@ def choose_regressed(config: DetectorConfig, folds: list, regressors: list) -> d
             per_fold = [regressed_summary(config, f, r, mn, m) for f, r in zip(folds, regressors)]
             det = min(f["detection_rate"] for f in per_fold)
             far = max(f["false_alarm_rate"] for f in per_fold)
-            key = (True, det, -far) if far <= CHOICE_FALSE_ALARMS else (False, -far, det)
+            key = worst_fold_key(det, far)
             if best is None or key >= best[0]:
                 best = (key, {"min_neighbors": mn, "window_margin": m, "rule": "worst-fold",
                               "inner_detection_rate": det, "inner_false_alarm_rate": far})
@@ -542,13 +550,13 @@ def choose_by_margin(grids: list) -> str:
 
 
 def choose_by_worst_fold(grids: list) -> str:
-    """:func:`choose_grouping`'s ``worst-fold`` rule on stored grids: the highest worst detection with every grid at
-    <= CHOICE_FALSE_ALARMS false alarms (else the fewest worst false alarms)."""
-    def key(setting):
-        det = min(g[setting][0] for g in grids)
-        far = max(g[setting][1] for g in grids)
-        return (True, det, -far) if far <= CHOICE_FALSE_ALARMS else (False, -far, det)
-    return max(grids[0], key=key)
+    """:func:`choose_grouping`'s ``worst-fold`` rule on stored grids (:func:`worst_fold_key`, ties as there)."""
+    best = None
+    for setting in grids[0]:        # grid order; ties go to the later setting (more neighbours, higher margin)
+        key = worst_fold_key(min(g[setting][0] for g in grids), max(g[setting][1] for g in grids))
+        if best is None or key >= best[0]:
+            best = (key, setting)
+    return best[1]
 
 
 PREVIOUS_GROUPING = (3, -0.5)   # the node's min_neighbors / window_margin from session 6 to 48 (rule worst-fold, seed 0)

@@ -65,3 +65,11 @@ def test_held_out_choice_reads_only_the_other_folds(monkeypatch):
 
 def test_runs_without_grids_give_no_choice():
     assert bench.node_grouping({f"{bench.SHIPPED_RECIPE}_seed0": {"seed": 0, "folds": [{"regressed": {}}]}}) is None
+
+
+def test_worst_fold_ties_go_to_the_later_setting_as_in_choose_grouping():
+    # equal worst detection and false alarms: choose_grouping and choose_regressed keep the later setting of the grid
+    # (more neighbours, a higher margin); the rule on stored grids must not pick otherwise
+    grids = [grid((0.95, 0.05), (0.95, 0.05), (0.95, 0.05)), grid((0.97, 0.02), (0.96, 0.03), (0.97, 0.01))]
+    assert bench.choose_by_worst_fold(grids) == SPARSE
+    assert bench.worst_fold_key(0.95, 0.05) > bench.worst_fold_key(0.99, 0.09)   # over 8 %: after every one within
