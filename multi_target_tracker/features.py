@@ -52,6 +52,9 @@ CONTOUR_DIM = 2 * CONTOUR_SIZE  # 128
 FUSED_DIM = LBP_DIM + CONTOUR_DIM  # 1152
 FEATURE_SETS = ("lbp", "contour", "fused")
 BLOCK_OFFSETS = ((0, 0), (0, BLOCK), (BLOCK, 0), (BLOCK, BLOCK))  # (dy, dx) in row order
+# a contour level's potentials are summed from its edge pixels alone (:func:`_edge_potentials`) when at most this share of
+# its 8-pixel words holds one: the two paths break even at about 0.13 on the drone-view tiles' levels (session 50)
+SPARSE_EDGE_WORDS = 0.12
 
 
 class FeatureError(ValueError):
@@ -317,11 +320,14 @@ class LevelScan:
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
         x0 = 2 + s2 * np.arange(self.cols)
         b = _inner_contour_image(gray_c, float(edge_threshold))
-        # P_x down the columns of b, P_y down the columns of b transposed (its rows): the same sweep, which
-        # runs across a whole row at once (2x faster on the rows than sweeping along each row)
-        self.px = _column_potentials(b, s2, len(y0), n, True)
-        py_t = _column_potentials(cv2.transpose(b), s2, len(x0), n, False)
-        self.py = np.ascontiguousarray(py_t.T)   # (H, cols): neighbouring windows' values side by side
+        if _edge_words(b) <= SPARSE_EDGE_WORDS * (b.size // 8):   # few edges (smooth or upsampled levels)
+            self.px, self.py = _edge_potentials(b, s2, len(y0), len(x0), n)
+        else:
+            # P_x down the columns of b, P_y down the columns of b transposed (its rows): the same sweep, which
+            # runs across a whole row at once (2x faster on the rows than sweeping along each row)
+            self.px = _column_potentials(b, s2, len(y0), n, True)
+            py_t = _column_potentials(cv2.transpose(b), s2, len(x0), n, False)
+            self.py = np.ascontiguousarray(py_t.T)   # (H, cols): neighbouring windows' values side by side
         self.m_contour = _contour_maxima(self.px, self.py, s2, n, self.rows, self.cols)
         self._y0, self._x0 = y0, x0
 
@@ -466,6 +472,80 @@ def _column_potentials(b, step, rows, n, from_bottom):
         for x in range(width):
             line[x] = a * np.int64(count_end[x] - count_top[x]) + b_ * (ysum_end[x] - ysum_top[x])
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _edge_words(b):
+    """How many of the 8-byte words of ``b`` (C-contiguous; its last ``size % 8`` bytes not counted) hold an edge
+    pixel: the sparse path's cost goes with them."""
+    flat = b.ravel()
+    words = flat[:flat.size // 8 * 8].view(np.uint64)
+    count = 0
+    for i in range(len(words)):
+        count += words[i] != 0
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def _edge_potentials(b, step, rows, cols, n):
+    """:func:`_column_potentials`' ``P_x`` ``(rows, W)`` and ``P_y`` ``(H, cols)`` (as ``LevelScan`` keeps them) of a
+    ``b`` with few edge pixels, from the edge pixels alone: each adds itself (and its row or column) to the prefix
+    mark it first counts in, ``2 + step k`` being the first mark beyond it, and the marks are then summed up; the
+    potentials are the same differences of prefix sums (the same integers). ``b`` is C-contiguous; it is read eight
+    pixels to a word, so that a blank word costs one test. On the UAV set-up's levels (0.2 % of the pixels edges:
+    smooth and upsampled) twice as fast as the two sweeps and the transpose (session 50: 11 against 23 ms a frame); its
+    cost grows with the edges, past theirs when about an eighth of the words hold one (:data:`SPARSE_EDGE_WORDS`)."""
+    height, width = b.shape
+    per = n // step
+    marks_r, marks_c = rows + per, cols + per
+    count_r = np.zeros((marks_r + 1, width), np.int32)   # [mark, column]: the pixels first counted at that mark
+    sum_r = np.zeros((marks_r + 1, width), np.int64)     # ... and their rows' sum (the last slot: beyond all marks)
+    count_c = np.zeros((marks_c + 1, height), np.int32)  # [mark, row]: the same along the rows
+    sum_c = np.zeros((marks_c + 1, height), np.int64)
+    first_c = np.empty(width, np.int64)
+    for x in range(width):
+        first_c[x] = min(0 if x < 2 else (x - 2) // step + 1, marks_c)
+    flat = b.ravel()
+    whole = flat.size // 8
+    words = flat[:whole * 8].view(np.uint64)
+    y, row_end = 0, width
+    for i in range(whole + 1):
+        if i < whole:
+            if words[i] == 0:
+                continue
+            lo, hi = 8 * i, 8 * i + 8
+        else:
+            lo, hi = 8 * whole, flat.size
+        for p in range(lo, hi):
+            if flat[p]:
+                while p >= row_end:
+                    row_end += width
+                    y += 1
+                x = p - (row_end - width)
+                kr, kc = min(0 if y < 2 else (y - 2) // step + 1, marks_r), first_c[x]
+                count_r[kr, x] += 1
+                sum_r[kr, x] += y
+                count_c[kc, y] += 1
+                sum_c[kc, y] += x
+    for k in range(1, marks_r):
+        for x in range(width):
+            count_r[k, x] += count_r[k - 1, x]
+            sum_r[k, x] += sum_r[k - 1, x]
+    for k in range(1, marks_c):
+        for y in range(height):
+            count_c[k, y] += count_c[k - 1, y]
+            sum_c[k, y] += sum_c[k - 1, y]
+    px = np.empty((rows, width), np.float32)
+    for r in range(rows):                    # sum_i b (n - i) over rows 2 + step r ..: (n + top) count - row sum
+        a = n + 2 + step * r
+        for x in range(width):
+            px[r, x] = a * np.int64(count_r[r + per, x] - count_r[r, x]) - (sum_r[r + per, x] - sum_r[r, x])
+    py = np.empty((height, cols), np.float32)
+    for c in range(cols):                    # sum_j b (j + 1) over columns 2 + step c ..: column sum - (left - 1) count
+        a = 1 - (2 + step * c)
+        for y in range(height):
+            py[y, c] = a * np.int64(count_c[c + per, y] - count_c[c, y]) + (sum_c[c + per, y] - sum_c[c, y])
+    return px, py
 
 
 @numba.njit(cache=True, nogil=True)

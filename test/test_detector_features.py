@@ -53,8 +53,11 @@ def test_window_features_shape_and_parts_normalised():
         F.window_features(np.zeros((32, 32), np.uint8), np.zeros((66, 66), np.uint8), 40.0)
 
 
+@pytest.mark.parametrize("potentials", ["swept", "from edge pixels"])
 @pytest.mark.parametrize("stride", [2, 4, 8, 16])
-def test_level_scan_equals_reference_window_by_window(stride):
+def test_level_scan_equals_reference_window_by_window(stride, potentials, monkeypatch):
+    # both ways of summing the contour potentials (the scan picks one by the level's share of edge words)
+    monkeypatch.setattr(F, "SPARSE_EDGE_WORDS", -1.0 if potentials == "swept" else 1.0)
     rng = np.random.default_rng(stride)
     frame = cv2.GaussianBlur(rng.integers(0, 255, (150, 190), dtype=np.uint8), (5, 5), 1.5)
     cv2.rectangle(frame, (40, 30), (90, 60), 230, -1)
@@ -88,6 +91,30 @@ def test_level_scan_equals_reference_window_by_window(stride):
             assert np.array_equal(idx, ref_idx) and score == pytest.approx(ref_score, abs=1e-9)
             kept_idx, kept_score = kept.evaluate(cascade.packed(), margin)
             assert np.array_equal(kept_idx, idx) and np.array_equal(kept_score, score)
+
+
+def _swept_potentials(b, step, rows, cols, n):
+    px = F._column_potentials(b, step, rows, n, True)
+    return px, np.ascontiguousarray(F._column_potentials(np.ascontiguousarray(b.T), step, cols, n, False).T)
+
+
+@pytest.mark.parametrize("shape", [(130, 97), (97, 130), (70, 70), (66, 81), (65, 64), (3, 9)])
+@pytest.mark.parametrize("step", [2, 8, 16, 32])
+def test_potentials_from_edge_pixels_equal_the_sweeps(shape, step):
+    """The sparse path gives the sweeps' potentials to the bit, from blank to full images (rim pixels, whose rows and
+    columns lie before the first window, included), on shapes that are no multiple of a word."""
+    rng = np.random.default_rng(step * 1000 + shape[0])
+    n = F.CONTOUR_SIZE
+    rows, cols = max(0, (shape[0] - 4 - n) // step + 1), max(0, (shape[1] - 4 - n) // step + 1)
+    for density in (0.0, 0.002, 0.05, 0.5, 1.0):
+        b = (rng.random(shape) < density).astype(np.uint8)
+        px, py = F._edge_potentials(b, step, rows, cols, n)
+        want_px, want_py = _swept_potentials(b, step, rows, cols, n)
+        assert px.shape == want_px.shape == (rows, shape[1]) and py.shape == want_py.shape == (shape[0], cols)
+        assert np.array_equal(px, want_px) and np.array_equal(py, want_py)
+        if rows and cols and density == 1.0:
+            assert px.max() == n * (n + 1) // 2 and py.max() == n * (n + 1) // 2   # a full window's potential
+    assert F._edge_words(np.zeros((7, 9), np.uint8)) == 0 and F._edge_words(np.ones((2, 8), np.uint8)) == 2
 
 
 def test_level_scan_of_some_windows_and_of_levels_resized_already():
