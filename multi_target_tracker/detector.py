@@ -279,7 +279,9 @@ class DetectorConfig:
         for_models = regressor.info.get("for_models") if regressor is not None else None
         if for_models and Path(self.model).name not in for_models:   # its offsets fit those models' windows only
             raise ConfigError(f"box regressor {self.box_regressor!r} was trained for {', '.join(for_models)}, not "
-                              f"{Path(self.model).name}: set box_regressor to '' (or to one for this model)",
+                              f"{Path(self.model).name}: set box_regressor to '' (or to one for this model); the "
+                              "set-up that pairs them (config/detector.yaml) chose its grouping (min_neighbors, "
+                              "window_margin) and blob views with that model too: set them for this one",
                               ("box_regressor", "model"))
 
 

@@ -174,7 +174,9 @@ def test_detect_tool_over_folder_and_bag(model, scenes, tmp_path, capsys):
         cv2.imwrite(str(folder / f"f{k}.png"), image)
     # config/detector.yaml's box regressor belongs to the drone-view model: refused with another one
     assert detect.main([str(folder), "-o", str(tmp_path / "refused.txt"), "--model", model, "--no-progress"]) == 2
-    assert "was trained for drone_vehicles_fused.json" in capsys.readouterr().err
+    refused = capsys.readouterr().err
+    assert "was trained for drone_vehicles_fused.json" in refused
+    assert "min_neighbors" in refused and "blob views" in refused    # the set-up's other model-bound choices
     args = ["--model", model, "--box-regressor", "", "--no-progress"] + [x for k, v in TINY_DETECTOR.items()
                                                  for x in ("--" + k.replace("_", "-"), str(v))]
     assert detect.main([str(folder), "-o", str(tmp_path / "boxes.txt"), "--bag", str(tmp_path / "out.mcap")] + args) == 0
