@@ -311,18 +311,21 @@ def main() -> int:
     if args.other_seed_model:
         rows["other_seed"] = variant(det, {"model": args.other_seed_model})
     former = Detector(DetectorConfig(**FORMER))         # at its own altitude, on a few seeds only
+    # the machine's speed in this run: OpenCV's C++ cascade, which this package's changes do not touch (bench/detector.py)
+    from detector import cars_reference, time_frames  # noqa: PLC0415 (bench/detector.py, beside this script)
+    reference = cars_reference()
     # compile and load every path before timing (the scan, the blobs' views, grouping, verifier, network): a frame of
     # a tuning scene, not an evaluation one. A blank frame left the blob and group paths to the first evaluation seed,
     # whose frames/s (1.6 against 4.2-6.2 in session 45's run) then pulled the mean over seeds down
     warm_up = frames_of(TUNING[0][0], TUNING[0][1], UAV_SETUP_GROUND_RESOLUTION, frames=8)[0][0]
-    for detector in (*rows.values(), former):
+    for detector in (*rows.values(), former, *([reference] if reference is not None else [])):
         detector.detect(warm_up)
     keys = list(dict.fromkeys((*rows, "former", "other_seed")))      # every row of the JSON, run or not
     results = {"quick": args.quick, "setup": SETUP, "model": Path(det.config.model).name,
                "ground_resolution": UAV_SETUP_GROUND_RESOLUTION,
                "searched_window_heights": [det.min_size, det.max_size],
                "heights": {}, "seeds": [], **{key: [] for key in keys},
-               "other_seed_model": args.other_seed_model}
+               "other_seed_model": args.other_seed_model, "machine_reference": []}
     for g in HEIGHTS:     # camera height: vehicle sizes (the scene only, no detector)
         sides = np.concatenate([short_sides(frames_of(s, d, g, every=16)) for s, d in seeds[:4]])
         results["heights"][str(g)] = {"short_side_percentiles_0_5_50_95_100":
@@ -333,6 +336,8 @@ def main() -> int:
         results["seeds"].append({"seed": seed, "difficulty": difficulty})
         for key, detector in rows.items():
             results[key].append(run(detector, items[::4] if key == "full_pyramid" else items))
+        if reference is not None:
+            results["machine_reference"].append(time_frames(reference.detect, [item[0] for item in items]))
         if difficulty == 1 and len(results["former"]) < (2 if args.quick else 3):
             results["former"].append(run(former, frames_of(seed, difficulty, 1.0)[::2]))
         r = results["setup_results"][-1]
@@ -362,6 +367,19 @@ def _fields(config: DetectorConfig) -> dict:
 def variant(det: Detector, overrides: dict) -> Detector:
     """A detector of ``det``'s configuration with ``overrides`` (an earlier set-up or a scan without the size prior)."""
     return Detector(from_mapping(DetectorConfig, {**_fields(det.config), **overrides}))
+
+
+def machine_reference(results: dict, setup_fps: float) -> list[str]:
+    """The report's line on the machine's speed in the run (none in results written before it was timed)."""
+    runs = results.get("machine_reference") or []
+    if not runs:
+        return []
+    cars = float(np.mean([r["fps"] for r in runs]))
+    return ["", f"The machine in this run: OpenCV's `CascadeClassifier` with cars.xml (`bench/detector.py`'s 640x480 "
+            f"speed row; C++ this package does not change) ran {cars:.1f} frames/s on the same frames (mean over "
+            f"seeds), the set-up {setup_fps:.1f}: {setup_fps / cars:.2f} of it. This machine's speed drifts by 20 % "
+            "and more between runs: compare runs by the ratio (it moves too, but less: the fused cascade's to "
+            "cars.xml was 0.87-0.99 over sessions 47-50)."]
 
 
 def markdown(results: dict) -> str:
@@ -419,6 +437,7 @@ def markdown(results: dict) -> str:
                   "point", previous),
              line("previous set-up: upright 3:2 model uav_vehicles_low.json, 0/90 degrees only", upright),
              line("former set-up (default altitude, 21x14 model, windows from 14 px; every 2nd frame)", former),
+             *machine_reference(results, s["fps_mean"]),
              "", "Group confidence (threshold chosen on the 18 tuning seeds, best detection minus false alarms pooled, "
              "then applied to the evaluation seeds above; AP and detection at a false-alarm cap from the evaluation "
              "seeds' own PR curve):", "",
