@@ -315,7 +315,7 @@ def test_the_patch_net_floor_rejects_only_groups_below_it_without_the_network(de
     cfg = dataclasses.replace(detector.config, low_confidence_band=0.0)
     trees = Detector(dataclasses.replace(cfg, patch_net="", patch_net_floor=EVERY_GROUP))
     every = Detector(dataclasses.replace(cfg, patch_net_floor=EVERY_GROUP))
-    floor = 0.0                                       # between the set-up's -5 and its threshold: many on each side
+    floor = 0.0                                       # between the set-up's -4 and its threshold: many on each side
     floored = Detector(dataclasses.replace(cfg, patch_net_floor=floor))
     below = above = 0
     for image, _ in held_out_frames[HELD_OUT[0]][:4]:
