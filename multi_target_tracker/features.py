@@ -52,8 +52,9 @@ CONTOUR_DIM = 2 * CONTOUR_SIZE  # 128
 FUSED_DIM = LBP_DIM + CONTOUR_DIM  # 1152
 FEATURE_SETS = ("lbp", "contour", "fused")
 BLOCK_OFFSETS = ((0, 0), (0, BLOCK), (BLOCK, 0), (BLOCK, BLOCK))  # (dy, dx) in row order
-# a contour level's potentials are summed from its edge pixels alone (:func:`_edge_potentials`) when at most this share of
-# its 8-pixel words holds one: the two paths break even at about 0.13 on the drone-view tiles' levels (session 50)
+# a contour level's potentials are summed from its edge pixels alone (:func:`_edge_potentials`) when at most this
+# share of its 8-pixel words holds one: the two paths break even at about 0.13 on the drone-view tiles' levels
+# (session 50)
 SPARSE_EDGE_WORDS = 0.12
 
 
@@ -320,14 +321,8 @@ class LevelScan:
         y0 = 2 + s2 * np.arange(self.rows)  # window top rows in contour-level pixels
         x0 = 2 + s2 * np.arange(self.cols)
         b = _inner_contour_image(gray_c, float(edge_threshold))
-        if _edge_words(b) <= SPARSE_EDGE_WORDS * (b.size // 8):   # few edges (smooth or upsampled levels)
-            self.px, self.py = _edge_potentials(b, s2, len(y0), len(x0), n)
-        else:
-            # P_x down the columns of b, P_y down the columns of b transposed (its rows): the same sweep, which
-            # runs across a whole row at once (2x faster on the rows than sweeping along each row)
-            self.px = _column_potentials(b, s2, len(y0), n, True)
-            py_t = _column_potentials(cv2.transpose(b), s2, len(x0), n, False)
-            self.py = np.ascontiguousarray(py_t.T)   # (H, cols): neighbouring windows' values side by side
+        few_edges = _edge_words(b) <= SPARSE_EDGE_WORDS * (b.size // 8)   # smooth or upsampled levels
+        self.px, self.py = (_edge_potentials if few_edges else _swept_potentials)(b, s2, len(y0), len(x0), n)
         self.m_contour = _contour_maxima(self.px, self.py, s2, n, self.rows, self.cols)
         self._y0, self._x0 = y0, x0
 
@@ -474,6 +469,15 @@ def _column_potentials(b, step, rows, n, from_bottom):
     return out
 
 
+def _swept_potentials(b: np.ndarray, step: int, rows: int, cols: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``P_x`` ``(rows, W)`` and ``P_y`` ``(H, cols)`` of every window (window top rows / left columns ``2 + step k``)
+    by :func:`_column_potentials`: ``P_x`` down the columns of ``b``, ``P_y`` down the columns of ``b`` transposed
+    (its rows), the same sweep, which runs across a whole row at once (2x faster on the rows than sweeping along
+    each row); ``P_y`` kept ``(H, cols)``, neighbouring windows' values side by side."""
+    px = _column_potentials(b, step, rows, n, True)
+    return px, np.ascontiguousarray(_column_potentials(cv2.transpose(b), step, cols, n, False).T)
+
+
 @numba.njit(cache=True, nogil=True)
 def _edge_words(b):
     """How many of the 8-byte words of ``b`` (C-contiguous; its last ``size % 8`` bytes not counted) hold an edge
@@ -488,10 +492,10 @@ def _edge_words(b):
 
 @numba.njit(cache=True, nogil=True)
 def _edge_potentials(b, step, rows, cols, n):
-    """:func:`_column_potentials`' ``P_x`` ``(rows, W)`` and ``P_y`` ``(H, cols)`` (as ``LevelScan`` keeps them) of a
-    ``b`` with few edge pixels, from the edge pixels alone: each adds itself (and its row or column) to the prefix
-    mark it first counts in, ``2 + step k`` being the first mark beyond it, and the marks are then summed up; the
-    potentials are the same differences of prefix sums (the same integers). ``b`` is C-contiguous; it is read eight
+    """:func:`_swept_potentials`' ``P_x`` ``(rows, W)`` and ``P_y`` ``(H, cols)`` of a ``b`` with few edge pixels, from
+    the edge pixels alone: each adds itself (and its row or column) to the prefix mark it first counts in, ``2 + step
+    k`` being the first mark beyond it, and the marks are then summed up; the potentials are the same differences of
+    prefix sums (the same integers). ``b`` is C-contiguous; it is read eight
     pixels to a word, so that a blank word costs one test. On the UAV set-up's levels (0.2 % of the pixels edges:
     smooth and upsampled) twice as fast as the two sweeps and the transpose (session 50: 11 against 23 ms a frame); its
     cost grows with the edges, past theirs when about an eighth of the words hold one (:data:`SPARSE_EDGE_WORDS`)."""

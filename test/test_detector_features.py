@@ -93,11 +93,6 @@ def test_level_scan_equals_reference_window_by_window(stride, potentials, monkey
             assert np.array_equal(kept_idx, idx) and np.array_equal(kept_score, score)
 
 
-def _swept_potentials(b, step, rows, cols, n):
-    px = F._column_potentials(b, step, rows, n, True)
-    return px, np.ascontiguousarray(F._column_potentials(np.ascontiguousarray(b.T), step, cols, n, False).T)
-
-
 @pytest.mark.parametrize("shape", [(130, 97), (97, 130), (70, 70), (66, 81), (65, 64), (3, 9)])
 @pytest.mark.parametrize("step", [2, 8, 16, 32])
 def test_potentials_from_edge_pixels_equal_the_sweeps(shape, step):
@@ -109,7 +104,7 @@ def test_potentials_from_edge_pixels_equal_the_sweeps(shape, step):
     for density in (0.0, 0.002, 0.05, 0.5, 1.0):
         b = (rng.random(shape) < density).astype(np.uint8)
         px, py = F._edge_potentials(b, step, rows, cols, n)
-        want_px, want_py = _swept_potentials(b, step, rows, cols, n)
+        want_px, want_py = F._swept_potentials(b, step, rows, cols, n)
         assert px.shape == want_px.shape == (rows, shape[1]) and py.shape == want_py.shape == (shape[0], cols)
         assert np.array_equal(px, want_px) and np.array_equal(py, want_py)
         if rows and cols and density == 1.0:
