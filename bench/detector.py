@@ -417,18 +417,24 @@ def regressed_summary(config: DetectorConfig, fold_groups: list, regressor, min_
     return acc.summary()
 
 
-def choose_regressed(config: DetectorConfig, folds: list, regressors: list) -> dict:
-    """``choose_grouping``'s ``worst-fold`` rule over inner folds whose groups are refined by their own regressor."""
+def regressed_grid(config: DetectorConfig, fold_groups: list, regressor) -> dict:
+    """``{(min_neighbors, window_margin): regressed_summary}`` of one fold's groups refined by ``regressor`` (None: mean
+    boxes), at every setting of the grid, in grid order."""
+    return {(mn, m): regressed_summary(config, fold_groups, regressor, mn, m)
+            for mn in GRID_MIN_NEIGHBORS for m in GRID_MARGIN}
+
+
+def choose_regressed(grids: list) -> dict:
+    """``choose_grouping``'s ``worst-fold`` rule over inner folds (their :func:`regressed_grid`, each refined by its own
+    regressor); ties go to the later setting of the grid."""
     best = None
-    for mn in GRID_MIN_NEIGHBORS:
-        for m in GRID_MARGIN:
-            per_fold = [regressed_summary(config, f, r, mn, m) for f, r in zip(folds, regressors)]
-            det = min(f["detection_rate"] for f in per_fold)
-            far = max(f["false_alarm_rate"] for f in per_fold)
-            key = worst_fold_key(det, far)
-            if best is None or key >= best[0]:
-                best = (key, {"min_neighbors": mn, "window_margin": m, "rule": "worst-fold",
-                              "inner_detection_rate": det, "inner_false_alarm_rate": far})
+    for mn, m in grids[0]:
+        det = min(g[mn, m]["detection_rate"] for g in grids)
+        far = max(g[mn, m]["false_alarm_rate"] for g in grids)
+        key = worst_fold_key(det, far)
+        if best is None or key >= best[0]:
+            best = (key, {"min_neighbors": mn, "window_margin": m, "rule": "worst-fold",
+                          "inner_detection_rate": det, "inner_false_alarm_rate": far})
     return best[1]
 
 
@@ -478,16 +484,19 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
             entry["transferred"] = {"regressor": other[0].name, "at_node_defaults": _rates(regressed_summary(
                 defaults, groups[k], BoxRegressor.load(other[0]), *node))}
             print(f"[box regression seed {seed}] fold {k} transferred: {entry['transferred']}", flush=True)
+        inner_grids = {}
         for name, reg, regs in (("mean box", None, [None] * len(inner)), ("regressed", regressor, inner_regs)):
-            chosen = choose_regressed(defaults, [groups[j] for j in inner], regs)
+            inner_grids[name] = [regressed_grid(defaults, groups[j], r) for j, r in zip(inner, regs)]
+            chosen = choose_regressed(inner_grids[name])
             entry[name] = {"chosen": chosen,
                            "at_choice": _rates(regressed_summary(defaults, groups[k], reg, chosen["min_neighbors"],
                                                                  chosen["window_margin"])),
                            "at_node_defaults": _rates(regressed_summary(defaults, groups[k], reg, *node))}
             print(f"[box regression seed {seed}] fold {k} {name}: {entry[name]}", flush=True)
-        # every grid setting, for the choice of the node's grouping over all training seeds (node_grouping)
-        entry["grid"] = grid_rates(defaults, groups[k], regressor)
-        entry["inner_grids"] = {str(j): grid_rates(defaults, groups[j], r) for j, r in zip(inner, inner_regs)}
+        # every grid setting, for the choice of the node's grouping over all training seeds (node_grouping); the inner
+        # folds' grids are the ones the regressed inner choice was made on
+        entry["grid"] = grid_rates(regressed_grid(defaults, groups[k], regressor))
+        entry["inner_grids"] = {str(j): grid_rates(g) for j, g in zip(inner, inner_grids["regressed"])}
         plain = entry["mean box"]["chosen"]     # the regressor as a last step only: the mean box's grouping kept
         entry["regressed, mean-box grouping"] = {"chosen": plain, "at_choice": _rates(regressed_summary(
             defaults, groups[k], regressor, plain["min_neighbors"], plain["window_margin"]))}
@@ -512,15 +521,10 @@ def kfold_box_regression(work: Path, recipe_name: str, seed: int, feature_set: s
     return out, regressor
 
 
-def grid_rates(config: DetectorConfig, fold_groups: list, regressor) -> dict:
-    """``{"min_neighbors/window_margin": [detection, false alarms]}`` of one fold's groups refined by ``regressor``,
-    at every setting of the grid."""
-    rates = {}
-    for mn in GRID_MIN_NEIGHBORS:
-        for m in GRID_MARGIN:
-            s = regressed_summary(config, fold_groups, regressor, mn, m)
-            rates[grid_key(mn, m)] = [round(s["detection_rate"], 4), round(s["false_alarm_rate"], 4)]
-    return rates
+def grid_rates(grid: dict) -> dict:
+    """A :func:`regressed_grid` as stored: ``{"min_neighbors/window_margin": [detection, false alarms]}``, rounded."""
+    return {grid_key(mn, m): [round(s["detection_rate"], 4), round(s["false_alarm_rate"], 4)]
+            for (mn, m), s in grid.items()}
 
 
 def grid_key(min_neighbors: int, margin: float) -> str:
