@@ -378,8 +378,9 @@ def machine_reference(results: dict, setup_fps: float) -> list[str]:
     return ["", f"The machine in this run: OpenCV's `CascadeClassifier` with cars.xml (`bench/detector.py`'s 640x480 "
             f"speed row; C++ this package does not change) ran {cars:.1f} frames/s on the same frames (mean over "
             f"seeds), the set-up {setup_fps:.1f}: {setup_fps / cars:.2f} of it. This machine's speed drifts by 20 % "
-            "and more between runs: compare runs by the ratio (it moves too, but less: the fused cascade's to "
-            "cars.xml was 0.87-0.99 over sessions 47-50)."]
+            "and more between runs, and between sessions by 1.6x: compare runs by the ratio, which moves too, less "
+            "(numba's code and OpenCV's C++ gain unequally on a faster state: the set-up's was 0.45 in session 50 "
+            "and 0.53 in 51, the fused cascade's in bench/detector.py 0.87-0.99 over sessions 47-50 and 1.10 in 51)."]
 
 
 def markdown(results: dict) -> str:
